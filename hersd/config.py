@@ -1,0 +1,196 @@
+"""Typed configuration of one training run.
+
+The YAML files under ``conf/`` are merged onto these dataclasses (registered in Hydra's
+ConfigStore by :func:`register_schemas`), so a wrong type or an unknown key fails at
+composition. Range checks live in ``__post_init__`` and run when
+:func:`to_train_config` turns the composed config into objects; they raise
+:class:`ConfigError` whose message is one line naming the field and the allowed values.
+
+Every default is the seed paper's appendix setting (which follows the reference HER code).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+from omegaconf import DictConfig, OmegaConf
+
+TASK_ENV_IDS = {
+    "reach": "FetchReach-v4",
+    "push": "FetchPush-v4",
+    "pick_and_place": "FetchPickAndPlace-v4",
+    "slide": "FetchSlide-v4",
+}
+GOAL_STRATEGIES = ("future", "final", "episode")
+SCHEDULE_KINDS = ("constant", "linear", "exponential")
+
+
+class ConfigError(ValueError):
+    """A configuration value is out of range; the message is one line for the user."""
+
+
+def _check(condition: bool, message: str) -> None:
+    if not condition:
+        raise ConfigError(message)
+
+
+def _is_finite(value: float) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+@dataclass
+class TaskConfig:
+    name: str = "push"  # short task name: reach | push | pick_and_place | slide
+    env_id: str = "FetchPush-v4"  # gymnasium-robotics environment id
+    cycles_per_epoch: int = 50  # rollout+update cycles per epoch (paper: 50; FetchReach: 10)
+    # Success radius in metres; null keeps the env's own (0.05 m for every v4 Fetch task).
+    # The paper's text states 0.07 m (Push, PickAndPlace) and 0.20 m (Slide).
+    distance_threshold: Optional[float] = None
+
+    def __post_init__(self) -> None:
+        _check(self.name in TASK_ENV_IDS,
+               f"task={self.name!r} is not a known task; choose one of: {', '.join(TASK_ENV_IDS)}")
+        _check(self.cycles_per_epoch >= 1, f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
+        if self.distance_threshold is not None:
+            _check(_is_finite(self.distance_threshold) and self.distance_threshold > 0,
+                   f"task.distance_threshold must be a positive number of metres or null, got {self.distance_threshold}")
+
+
+@dataclass
+class MEPConfig:
+    enabled: bool = False  # sample episodes by trajectory rarity (Zhao et al. 2019) instead of uniformly
+    temperature: float = 1.0  # priority ~ rank(rarity) ** (1 / temperature)
+    n_components: int = 3  # Bayesian Gaussian mixture components
+    fit_subsample: int = 2000  # fit on at most this many stored trajectories (uniform subsample)
+    max_iter: int = 100  # EM iterations per fit
+
+    def __post_init__(self) -> None:
+        _check(_is_finite(self.temperature) and self.temperature > 0,
+               f"algo.mep.temperature must be a positive number, got {self.temperature}")
+        _check(self.n_components >= 1, f"algo.mep.n_components must be >= 1, got {self.n_components}")
+        _check(self.fit_subsample >= self.n_components,
+               f"algo.mep.fit_subsample must be >= algo.mep.n_components, got {self.fit_subsample}")
+        _check(self.max_iter >= 1, f"algo.mep.max_iter must be >= 1, got {self.max_iter}")
+
+
+@dataclass
+class AlgoConfig:
+    name: str = "her"  # label used in run names and reports
+    lambda_r: float = 1.0  # weight of real rewards (eq. 7); HER: 1, ARCHER: 1
+    lambda_h: float = 1.0  # weight of hindsight rewards (eq. 8); HER: 1, ARCHER: 0.5
+    goal_strategy: str = "future"  # where hindsight goals come from: future | final | episode
+    mep: MEPConfig = field(default_factory=MEPConfig)
+
+    def __post_init__(self) -> None:
+        _check(self.goal_strategy in GOAL_STRATEGIES,
+               f"algo.goal_strategy={self.goal_strategy!r} is unknown; choose one of: {', '.join(GOAL_STRATEGIES)}")
+        for name in ("lambda_r", "lambda_h"):
+            value = getattr(self, name)
+            _check(_is_finite(value) and value > 0, f"algo.{name} must be a positive number, got {value}")
+
+
+@dataclass
+class ScheduleConfig:
+    kind: str = "constant"  # constant (HER) | linear (eq. 9, beta2 = 0) | exponential (eq. 9)
+    eps: float = 0.8  # the fixed relabel rate of kind=constant (HER: 0.8, i.e. replay_k = 4)
+    beta1: float = 0.0  # eq. 9: final drop of the rate, in [0, 1]
+    beta2: float = 0.0  # eq. 9: shape, any real; 0 is linear, > 0 concave, < 0 convex
+
+    def __post_init__(self) -> None:
+        _check(self.kind in SCHEDULE_KINDS,
+               f"schedule.kind={self.kind!r} is unknown; choose one of: {', '.join(SCHEDULE_KINDS)}")
+        _check(_is_finite(self.eps) and 0.0 <= self.eps <= 1.0,
+               f"schedule.eps must be a number in [0, 1], got {self.eps}")
+        _check(_is_finite(self.beta1) and 0.0 <= self.beta1 <= 1.0,
+               f"schedule.beta1 must be a number in [0, 1], got {self.beta1}")
+        _check(_is_finite(self.beta2), f"schedule.beta2 must be a finite real number, got {self.beta2}")
+        _check(self.kind != "linear" or self.beta2 == 0.0,
+               f"schedule.beta2 must be 0 for schedule=linear (got {self.beta2}); use schedule=exponential")
+
+
+@dataclass
+class DDPGConfig:
+    hidden_layers: int = 3  # actor and critic: this many hidden layers ...
+    hidden_units: int = 256  # ... of this many ReLU units
+    actor_lr: float = 1e-3  # Adam learning rate of the actor
+    critic_lr: float = 1e-3  # Adam learning rate of the critic
+    buffer_size: int = 1_000_000  # replay capacity in transitions (stored as whole episodes)
+    polyak: float = 0.95  # target <- polyak * target + (1 - polyak) * online, once per cycle
+    action_l2: float = 1.0  # weight of mean((pi / max_u)^2) in the actor loss
+    clip_obs: float = 200.0  # raw observations and goals are clipped to [-clip_obs, clip_obs]
+    clip_norm: float = 5.0  # normalised inputs are clipped to [-clip_norm, clip_norm]
+    norm_eps: float = 0.01  # lower bound of the normaliser's standard deviation
+    batch_size: int = 256  # transitions per update
+    rollouts_per_cycle: int = 2  # parallel episodes collected per cycle (the paper's 2 rollouts x 1 worker)
+    batches_per_cycle: int = 40  # updates per cycle
+    test_rollouts: int = 10  # evaluation rounds per epoch, each of rollouts_per_cycle episodes (= 20 episodes)
+    random_eps: float = 0.3  # probability that a training action is uniform random
+    noise_eps: float = 0.2  # std of the Gaussian noise added to training actions (times max_u)
+    gamma: Optional[float] = None  # discount; null means 1 - 1/T (0.98 for T = 50)
+
+    def __post_init__(self) -> None:
+        for name in ("hidden_layers", "hidden_units", "buffer_size", "batch_size", "rollouts_per_cycle",
+                     "batches_per_cycle", "test_rollouts"):
+            _check(getattr(self, name) >= 1, f"ddpg.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("actor_lr", "critic_lr", "clip_obs", "clip_norm", "norm_eps"):
+            value = getattr(self, name)
+            _check(_is_finite(value) and value > 0, f"ddpg.{name} must be a positive number, got {value}")
+        for name in ("polyak", "random_eps", "noise_eps", "action_l2"):
+            value = getattr(self, name)
+            _check(_is_finite(value) and value >= 0, f"ddpg.{name} must be a number >= 0, got {value}")
+        _check(self.polyak <= 1.0 and self.random_eps <= 1.0,
+               "ddpg.polyak and ddpg.random_eps must be <= 1")
+        if self.gamma is not None:
+            _check(_is_finite(self.gamma) and 0.0 < self.gamma < 1.0,
+                   f"ddpg.gamma must be in (0, 1) or null, got {self.gamma}")
+
+
+@dataclass
+class TrainConfig:
+    task: TaskConfig = field(default_factory=TaskConfig)
+    algo: AlgoConfig = field(default_factory=AlgoConfig)
+    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    seed: int = 0  # one seed, one result (every RNG is derived from it)
+    epochs: int = 200  # K in eq. 9 (the paper trains 200 epochs)
+    results_dir: str = "results"  # run directories are created below this folder
+    run_dir: Optional[str] = None  # null: derived from the config (see hersd.runs.run_dir)
+    checkpoint_every: int = 1  # save an exact-resume checkpoint every N epochs (0: never)
+    keep_checkpoint: bool = False  # keep the checkpoint after the run completes (it can be large)
+    quiet: bool = False  # no per-epoch progress lines (sweeps)
+
+    def __post_init__(self) -> None:
+        _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
+        _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
+        _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        _check(TASK_ENV_IDS.get(self.task.name) == self.task.env_id,
+               f"task.env_id={self.task.env_id!r} does not match task={self.task.name!r} "
+               f"(expected {TASK_ENV_IDS.get(self.task.name)!r})")
+
+
+def register_schemas() -> None:
+    """Register the schema so ``conf/train.yaml`` can name it first in its defaults."""
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(name="train_schema", node=TrainConfig)
+
+
+def to_train_config(cfg: DictConfig) -> TrainConfig:
+    """Composed Hydra config -> validated :class:`TrainConfig` (raises :class:`ConfigError`)."""
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        obj = OmegaConf.to_object(cfg)
+    except OmegaConfBaseException as err:
+        # OmegaConf wraps exceptions raised in __post_init__; surface ours unchanged.
+        cause = err.__cause__ or err.__context__
+        while cause is not None and not isinstance(cause, ConfigError):
+            cause = cause.__cause__ or cause.__context__
+        if cause is not None:
+            raise cause from None
+        raise ConfigError(str(err).splitlines()[0]) from None
+    if not isinstance(obj, TrainConfig):
+        raise ConfigError("the composed config is not a training config (conf/train.yaml must list train_schema)")
+    return obj
