@@ -1,0 +1,161 @@
+"""DDPG with the reference HER code's details (see docs/ARCHITECTURE.md, "Fidelity").
+
+- inputs: raw obs/goal clipped to +-clip_obs, normalised by running mean/std
+  (std >= norm_eps), clipped to +-clip_norm;
+- actor: MLP -> tanh * max_action; critic: MLP over [obs, goal, action / max_action];
+- target Q clipped to [q_min, 0] (q_min = -max(lambda) / (1 - gamma)); no done mask;
+- actor loss = -mean Q(s, pi(s)) + action_l2 * mean((pi / max_action)^2);
+- targets are moved by polyak averaging once per cycle (:meth:`DDPG.update_targets`).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from torch import nn
+
+from hersd.config import DDPGConfig
+from hersd.replay import TransitionBatch
+
+
+class RunningNormalizer:
+    """Running mean/std of vectors of size dim, from sums kept in float64."""
+
+    def __init__(self, dim: int, eps: float, clip: float):
+        self.eps, self.clip = eps, clip
+        self.total = np.zeros(dim)
+        self.total_sq = np.zeros(dim)
+        self.count = 0
+        self.mean = torch.zeros(dim)
+        self.std = torch.ones(dim)
+
+    def update(self, values: np.ndarray) -> None:
+        """Add values (n, dim) to the statistics and recompute mean and std."""
+        values = values.reshape(-1, self.total.shape[0]).astype(np.float64)
+        self.total += values.sum(axis=0)
+        self.total_sq += np.square(values).sum(axis=0)
+        self.count += values.shape[0]
+        mean = self.total / self.count
+        std = np.sqrt(np.maximum(self.eps ** 2, self.total_sq / self.count - np.square(mean)))
+        self.mean = torch.as_tensor(mean, dtype=torch.float32)
+        self.std = torch.as_tensor(std, dtype=torch.float32)
+
+    def __call__(self, values: torch.Tensor) -> torch.Tensor:
+        return torch.clamp((values - self.mean) / self.std, -self.clip, self.clip)
+
+    def state_dict(self) -> dict:
+        return {"total": self.total.copy(), "total_sq": self.total_sq.copy(), "count": self.count}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.total, self.total_sq, self.count = state["total"].copy(), state["total_sq"].copy(), state["count"]
+        if self.count:
+            self.update(np.zeros((0, self.total.shape[0])))
+
+
+def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for _ in range(hidden_layers):
+        layers += [nn.Linear(in_dim, hidden_units), nn.ReLU()]
+        in_dim = hidden_units
+    layers.append(nn.Linear(in_dim, out_dim))
+    return nn.Sequential(*layers)
+
+
+class UpdateStats(NamedTuple):
+    """Per-update scalars: losses and the mean and mean square of Q(s, a) over the batch."""
+
+    critic_loss: float
+    actor_loss: float
+    q_mean: float
+    q_sq_mean: float
+
+
+class DDPG:
+    """Actor, critic, their targets and optimisers, and the input normalisers."""
+
+    def __init__(self, cfg: DDPGConfig, obs_dim: int, goal_dim: int, action_dim: int, max_action: float,
+                 gamma: float, q_min: float):
+        self.cfg, self.max_action, self.gamma, self.q_min = cfg, max_action, gamma, q_min
+        self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm)
+        self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm)
+        in_dim = obs_dim + goal_dim
+        self.actor = mlp(in_dim, action_dim, cfg.hidden_layers, cfg.hidden_units)
+        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units)
+        self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
+        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
+
+    def _inputs(self, obs: np.ndarray, goal: np.ndarray) -> torch.Tensor:
+        """Raw obs (B, obs_dim) and goal (B, goal_dim) -> normalised actor input (B, obs_dim + goal_dim)."""
+        clip = self.cfg.clip_obs
+        obs_t = torch.from_numpy(np.clip(obs, -clip, clip, dtype=np.float32))
+        goal_t = torch.from_numpy(np.clip(goal, -clip, clip, dtype=np.float32))
+        return torch.cat([self.obs_norm(obs_t), self.goal_norm(goal_t)], dim=1)
+
+    def update_normalizers(self, obs: np.ndarray, goal: np.ndarray) -> None:
+        clip = self.cfg.clip_obs
+        self.obs_norm.update(np.clip(obs, -clip, clip))
+        self.goal_norm.update(np.clip(goal, -clip, clip))
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        """Actions (n, action_dim) for obs (n, obs_dim) and goal (n, goal_dim).
+
+        With explore: add N(0, noise_eps * max_action), clip, then with probability
+        random_eps replace the whole action by a uniform random one.
+        """
+        action = (torch.tanh(self.actor(self._inputs(obs, goal))) * self.max_action).numpy().astype(np.float64)
+        if not explore:
+            return action
+        cfg = self.cfg
+        action = np.clip(action + cfg.noise_eps * self.max_action * rng.standard_normal(action.shape),
+                         -self.max_action, self.max_action)
+        random_action = rng.uniform(-self.max_action, self.max_action, size=action.shape)
+        take_random = rng.random((action.shape[0], 1)) < cfg.random_eps
+        return np.where(take_random, random_action, action)
+
+    def update(self, batch: TransitionBatch) -> UpdateStats:
+        """One critic step then one actor step on a batch of B transitions."""
+        inputs = self._inputs(batch.obs, batch.goal)
+        next_inputs = self._inputs(batch.next_obs, batch.goal)
+        action = torch.from_numpy(batch.action) / self.max_action
+        reward = torch.from_numpy(batch.reward).unsqueeze(1)
+        with torch.no_grad():
+            next_action = torch.tanh(self.actor_target(next_inputs))
+            next_q = self.critic_target(torch.cat([next_inputs, next_action], dim=1))
+            target_q = torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
+        q = self.critic(torch.cat([inputs, action], dim=1))
+        critic_loss = torch.mean(torch.square(target_q - q))
+        self.critic_optim.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optim.step()
+
+        policy_action = torch.tanh(self.actor(inputs))  # = pi(s) / max_action
+        self.critic.requires_grad_(False)
+        actor_loss = (-self.critic(torch.cat([inputs, policy_action], dim=1)).mean()
+                      + self.cfg.action_l2 * torch.mean(torch.square(policy_action)))
+        self.actor_optim.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_optim.step()
+        self.critic.requires_grad_(True)
+        q = q.detach()
+        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item())
+
+    @torch.no_grad()
+    def update_targets(self) -> None:
+        """target <- polyak * target + (1 - polyak) * online, for actor and critic."""
+        for online, target in ((self.actor, self.actor_target), (self.critic, self.critic_target)):
+            torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), 1.0 - self.cfg.polyak)
+
+    def state_dict(self) -> dict:
+        return {name: getattr(self, name).state_dict() for name in
+                ("actor", "critic", "actor_target", "critic_target", "actor_optim", "critic_optim",
+                 "obs_norm", "goal_norm")}
+
+    def load_state_dict(self, state: dict) -> None:
+        for name, value in state.items():
+            getattr(self, name).load_state_dict(value)
