@@ -18,7 +18,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import torch
@@ -117,8 +117,12 @@ def _run_lock(directory: Path) -> Iterator[None]:
 
 
 # --------------------------------------------------------------------------- the run
-def train(cfg: TrainConfig, command: str = "") -> Path:
-    """Run (or resume, or find complete) the run of ``cfg``; returns the path of its log."""
+def train(cfg: TrainConfig, command: str = "", on_epoch: Callable[[dict], None] | None = None) -> Path:
+    """Run (or resume, or find complete) the run of ``cfg``; returns the path of its log.
+
+    ``on_epoch(record)`` is called after each epoch's record is logged (and checkpointed);
+    an exception it raises stops the run there, leaving it resumable.
+    """
     directory = run_dir(cfg)
     directory.mkdir(parents=True, exist_ok=True)
     log_path = directory / LOG_NAME
@@ -134,7 +138,7 @@ def train(cfg: TrainConfig, command: str = "") -> Path:
             os.replace(log_path, stale)
             _say(cfg, f"{log_path}: incomplete and without checkpoint; kept as {stale.name}, starting afresh")
             previous = None
-        _train_loop(cfg, directory, log_path, checkpoint_path, previous, checkpoint, command)
+        _train_loop(cfg, directory, log_path, checkpoint_path, previous, checkpoint, command, on_epoch)
     return log_path
 
 
@@ -144,7 +148,7 @@ def _say(cfg: TrainConfig, line: str) -> None:
 
 
 def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_path: Path, previous, checkpoint,
-                command: str) -> None:
+                command: str, on_epoch: Callable[[dict], None] | None) -> None:
     torch.set_num_threads(1)
     d = cfg.ddpg
     seeds = np.random.SeedSequence(cfg.seed).spawn(4)  # sampling/exploration, torch, train envs, test envs
@@ -243,6 +247,8 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
                     "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
                     "env_rngs": [env.np_random.bit_generator.state for env in train_envs + test_envs],
                     "env_steps": env_steps, "updates": updates})
+            if on_epoch is not None:
+                on_epoch(record)
         log.finish(cfg.epochs)
         if checkpoint_path.exists() and not cfg.keep_checkpoint:
             checkpoint_path.unlink()
