@@ -60,11 +60,13 @@ class TaskConfig:
 
 @dataclass
 class MEPConfig:
-    enabled: bool = False  # sample episodes by trajectory rarity (Zhao et al. 2019) instead of uniformly
-    temperature: float = 1.0  # priority ~ rank(rarity) ** (1 / temperature)
-    n_components: int = 3  # Bayesian Gaussian mixture components
-    fit_subsample: int = 2000  # fit on at most this many stored trajectories (uniform subsample)
-    max_iter: int = 100  # EM iterations per fit
+    # MEP (Zhao et al. 2019; hersd/mep.py, docs/MEP.md): from epoch 2 on, episodes are drawn by the
+    # rarity of their achieved-goal trajectory under a density model refit once per epoch.
+    enabled: bool = False  # sample episodes by trajectory rarity instead of uniformly
+    temperature: float = 1.0  # p ~ rank(rarity) ** (1 / temperature), rank 1 = most common; larger is flatter
+    n_components: int = 3  # components of the Bayesian Gaussian mixture (Dirichlet weight prior)
+    fit_subsample: int = 2000  # each epoch's fit uses at most this many stored trajectories, drawn uniformly
+    max_iter: int = 100  # EM iterations per fit at most (fits after the first start from the last one)
 
     def __post_init__(self) -> None:
         _check(_is_finite(self.temperature) and self.temperature > 0,
