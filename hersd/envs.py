@@ -7,13 +7,19 @@ as the registered one does.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from typing import Any, NamedTuple
 
 import gymnasium as gym
-import gymnasium_robotics
 import numpy as np
 
 from hersd.config import TaskConfig
+
+# gymnasium-robotics prints a notice about the Adroit envs' rewards at import; it does not
+# concern the Fetch tasks and would otherwise open every run's output.
+with contextlib.redirect_stderr(io.StringIO()):
+    import gymnasium_robotics
 
 gym.register_envs(gymnasium_robotics)
 

@@ -27,6 +27,7 @@ import hersd
 from hersd.config import ConfigError, TrainConfig, register_schemas, to_train_config
 from hersd.ddpg import DDPG
 from hersd.envs import EnvSpec, env_spec, goal_reward, make_env
+from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer, Episodes, sample_transitions
 from hersd.runlog import LOG_NAME, RunLogWriter, read_run
 from hersd.runs import config_hash, run_dir
@@ -165,6 +166,8 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
     q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - gamma)
     agent = DDPG(d, spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_min)
     buffer = EpisodeBuffer(d.buffer_size, horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
+    # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
+    prioritizer = EpisodePrioritizer(cfg.algo.mep, buffer.capacity) if cfg.algo.mep.enabled else None
 
     def reward_fn(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
         return goal_reward(achieved, goal, spec.distance_threshold)
@@ -179,6 +182,8 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
         for env, state in zip(train_envs + test_envs, checkpoint["env_rngs"]):
             env.np_random.bit_generator.state = state
         env_steps, updates = checkpoint["env_steps"], checkpoint["updates"]
+        if prioritizer is not None:
+            prioritizer.load_state_dict(checkpoint["mep"])
         start_epoch = checkpoint["epoch"] + 1
         previous.epochs = previous.epochs[previous.epochs["epoch"] < start_epoch]
 
@@ -191,6 +196,11 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
         for epoch in range(start_epoch, cfg.epochs + 1):
             epoch_start = time.perf_counter()
             eps = relabel_rate(cfg.schedule, epoch, cfg.epochs)
+            mep_fit_seconds = None
+            if prioritizer is not None:  # refit the density on the episodes stored so far (none in epoch 1)
+                tic = time.perf_counter()
+                prioritizer.fit(buffer.stored().achieved, rng)
+                mep_fit_seconds = time.perf_counter() - tic
             rollout_seconds = update_seconds = 0.0
             train_successes = []
             sums = np.zeros(4)  # critic loss, actor loss, Q mean, Q^2 mean, summed over updates
@@ -200,7 +210,9 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
                 episodes, success = run_episodes(train_envs, agent, horizon, explore=True, rng=rng)
                 train_successes.append(success)
                 env_steps += len(train_envs) * horizon
-                buffer.store(episodes)
+                slots = buffer.store(episodes)
+                if prioritizer is not None:
+                    prioritizer.score_new(slots, episodes.achieved)
                 # The normaliser sees the new episodes' transitions, relabelled as training will see them.
                 fresh = sample_transitions(episodes, horizon * len(train_envs), eps, rng, reward_fn,
                                            strategy=cfg.algo.goal_strategy)
@@ -208,9 +220,11 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
                 toc = time.perf_counter()
                 rollout_seconds += toc - tic
                 stored = buffer.stored()
+                episode_probs = prioritizer.probs(buffer.size) if prioritizer is not None else None
                 for _batch in range(d.batches_per_cycle):
                     batch = sample_transitions(stored, d.batch_size, eps, rng, reward_fn, cfg.algo.lambda_r,
-                                               cfg.algo.lambda_h, cfg.algo.goal_strategy)
+                                               cfg.algo.lambda_h, cfg.algo.goal_strategy,
+                                               episode_probs=episode_probs)
                     sums += agent.update(batch)
                     relabelled += int(batch.relabelled.sum())
                     real_success += int(batch.real_success.sum())
@@ -234,7 +248,8 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
                 "share_real_failure": (sampled - relabelled - real_success) / sampled,
                 "env_steps": env_steps, "updates": updates, "episodes_stored": buffer.size,
                 "rollout_seconds": rollout_seconds, "update_seconds": update_seconds, "eval_seconds": eval_seconds,
-                "epoch_seconds": time.perf_counter() - epoch_start,
+                "epoch_seconds": time.perf_counter() - epoch_start, "mep_fit_seconds": mep_fit_seconds,
+                "priority_entropy": prioritizer.entropy(buffer.size) if prioritizer is not None else None,
             }
             log.write_epoch(record)
             _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  eps {eps:.3f}  test {record['test_success']:.2f}  "
@@ -246,7 +261,8 @@ def _train_loop(cfg: TrainConfig, directory: Path, log_path: Path, checkpoint_pa
                                for k, v in buffer.state_dict().items()},
                     "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
                     "env_rngs": [env.np_random.bit_generator.state for env in train_envs + test_envs],
-                    "env_steps": env_steps, "updates": updates})
+                    "env_steps": env_steps, "updates": updates,
+                    **({"mep": prioritizer.state_dict()} if prioritizer is not None else {})})
             if on_epoch is not None:
                 on_epoch(record)
         log.finish(cfg.epochs)
@@ -279,8 +295,15 @@ def explain_config_error(err: Exception) -> str:
         group = err.missing_cfg_file.split("/")[0]
         choices = sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml")) if (CONF_DIR / group).is_dir() else []
         return f"{err.missing_cfg_file} is unknown" + (f"; choose one of: {', '.join(choices)}" if choices else "")
-    message = " ".join(str(err).split())
-    return message.replace("Error merging override ", "").replace("Could not override ", "cannot set ")
+    from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
+
+    cause = err.__cause__ if err.__cause__ is not None else err
+    key = getattr(cause, "full_key", None)
+    if isinstance(cause, (ConfigAttributeError, ConfigKeyError)) and key:
+        return f"{key} is not a config field; see hersd-train --help and hersd/config.py"
+    if isinstance(cause, ValidationError) and key:
+        return f"{key}: {str(cause).splitlines()[0]}"
+    return " ".join(str(err).split())
 
 
 def check_writable(directory: Path) -> None:

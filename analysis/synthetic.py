@@ -1,0 +1,77 @@
+"""Synthetic run logs with chosen success curves, for tests, benchmarks and demos.
+
+They are written with :class:`hersd.runlog.RunLogWriter`, so they read back exactly like
+training's logs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hersd.config import TrainConfig
+from hersd.runlog import LOG_NAME, RunLogWriter
+from hersd.runs import config_hash
+from hersd.schedules import relabel_rate
+
+
+def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[str, Any]]:
+    """One record per epoch (every EPOCH_FIELDS field) around a given test-success curve.
+
+    ``test_success`` has shape (n,) with n <= config.epochs; the other fields follow from it
+    and the schedule: relabel_rate = share_hindsight = eps(k), the real share split by the
+    train success, Q rising from -10 towards 0 with success.
+    """
+    success = np.asarray(test_success, dtype=float)
+    k = np.arange(1, len(success) + 1)
+    rate = np.array([relabel_rate(config.schedule, int(epoch), config.epochs) for epoch in k])
+    train_success = 0.9 * success
+    cycles = config.task.cycles_per_epoch
+    mep = config.algo.mep.enabled
+    columns = {
+        "epoch": k,
+        "relabel_rate": rate,
+        "test_success": success,
+        "train_success": train_success,
+        "q_mean": -10.0 * (1.0 - success) - 1.0,
+        "q_std": 2.0 + success,
+        "critic_loss": 0.1 * (1.0 - success) + 0.01,
+        "actor_loss": 10.0 * (1.0 - success) + 1.0,
+        "share_hindsight": rate,
+        "share_real_success": (1.0 - rate) * 0.5 * train_success,
+        "share_real_failure": (1.0 - rate) * (1.0 - 0.5 * train_success),
+        "env_steps": k * cycles * config.ddpg.rollouts_per_cycle * 50,
+        "updates": k * cycles * config.ddpg.batches_per_cycle,
+        "episodes_stored": k * cycles * config.ddpg.rollouts_per_cycle,
+        "rollout_seconds": np.full(len(k), 10.0),
+        "update_seconds": np.full(len(k), 30.0),
+        "eval_seconds": np.full(len(k), 5.0),
+        "epoch_seconds": np.full(len(k), 45.0),
+        "mep_fit_seconds": np.full(len(k), 2.0 if mep else np.nan),
+        "priority_entropy": np.full(len(k), 7.0 if mep else np.nan),
+    }
+    return [{name: values[i].item() for name, values in columns.items()} for i in range(len(k))]
+
+
+def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, complete: bool = True) -> Path:
+    """Write ``<folder>/run.mcap`` for ``config`` with the given test-success curve; returns its path.
+
+    ``complete`` marks the run finished (the curve should then have config.epochs values).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = {"run_id": config_hash(config), "config": dataclasses.asdict(config), "seed": config.seed,
+            "versions": {"hersd": "synthetic"}, "git_commit": None, "command": "analysis.synthetic",
+            "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0}
+    writer = RunLogWriter(folder / LOG_NAME, meta)
+    records = epoch_records(config, test_success)
+    for record in records:
+        writer.write_epoch(record)
+    if complete:
+        writer.finish(len(records))
+    else:
+        writer.close()
+    return folder / LOG_NAME

@@ -1,0 +1,91 @@
+"""Time ``hersd-report`` on 500 synthetic runs x 200 epochs (4 tasks x 25 configurations x 5 seeds).
+
+    python benchmarks/bench_report.py [--keep DIR]
+
+Prints the seconds of each report stage (load / metrics / figures / html) and the total;
+fails (exit 1) when the report takes 15 s or more. The logs are written with
+RunLogWriter in a temporary folder (not timed), or in ``--keep DIR`` to look at them after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from analysis import report
+from analysis.synthetic import write_run
+from hersd.config import TASK_ENV_IDS, AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.runs import run_dir
+from hersd.schedules import schedule_mean_rate
+
+BUDGET_SECONDS = 15.0
+EPOCHS = 200
+SEEDS = 5
+TASK_DIFFICULTY = {"reach": 0.02, "push": 0.25, "pick_and_place": 0.45, "slide": 0.8}
+
+
+def configurations() -> list[tuple[AlgoConfig, ScheduleConfig]]:
+    """25 (algo, schedule) pairs: HER, ARCHER, their MEP variants, the paper's linear and
+    exponential grids with lambda_h = 1 and 0.5, and a few more exponential points."""
+    her, archer = AlgoConfig(name="her"), AlgoConfig(name="archer", lambda_h=0.5)
+    her_mep = AlgoConfig(name="her_mep", mep=MEPConfig(enabled=True))
+    decays = [ScheduleConfig("linear", beta1=b) for b in (0.25, 0.5, 0.75, 1.0)]
+    decays += [ScheduleConfig("exponential", beta1=b, beta2=b) for b in (0.25, 0.5, 0.75, 1.0)]
+    extra = [ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), ScheduleConfig("exponential", beta1=0.75, beta2=1.5),
+             ScheduleConfig("exponential", beta1=1.0, beta2=-0.25)]
+    pairs = [(her, ScheduleConfig()), (archer, ScheduleConfig()), (her_mep, ScheduleConfig()),
+             (her_mep, ScheduleConfig("linear", beta1=0.5))]
+    pairs += [(algo, schedule) for algo in (her, archer) for schedule in decays]
+    pairs += [(her, schedule) for schedule in extra]
+    return pairs
+
+
+def success_curve(rng: np.random.Generator, difficulty: float, mean_rate: float, epochs: int) -> np.ndarray:
+    """A noisy logistic learning curve: 20 test episodes per epoch, faster when mu_eps is near 0.85."""
+    speed = 1.0 - 2.0 * abs(mean_rate - 0.85) + rng.normal(0.0, 0.1)
+    midpoint = epochs * (0.15 + difficulty) / max(speed, 0.2)
+    ceiling = 1.0 - 0.6 * difficulty + rng.normal(0.0, 0.05)
+    k = np.arange(1, epochs + 1)
+    probability = np.clip(ceiling / (1.0 + np.exp(-(k - midpoint) / (0.08 * epochs))), 0.0, 1.0)
+    return rng.binomial(20, probability) / 20.0
+
+
+def write_logs(folder: Path) -> int:
+    """Write the 500 synthetic run logs below ``folder``; returns how many."""
+    rng = np.random.default_rng(0)
+    count = 0
+    for task, difficulty in TASK_DIFFICULTY.items():
+        for algo, schedule in configurations():
+            for seed in range(SEEDS):
+                config = TrainConfig(task=TaskConfig(name=task, env_id=TASK_ENV_IDS[task]), algo=algo,
+                                     schedule=schedule, seed=seed, epochs=EPOCHS, results_dir=str(folder))
+                curve = success_curve(rng, difficulty, schedule_mean_rate(schedule, EPOCHS), EPOCHS)
+                write_run(run_dir(config), config, curve)
+                count += 1
+    return count
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--keep", type=Path, help="write the logs and the report here instead of a temporary folder")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="hersd-bench-") as temporary:
+        folder = args.keep or Path(temporary)
+        start = time.perf_counter()
+        count = write_logs(folder)
+        print(f"wrote {count} synthetic runs x {EPOCHS} epochs in {time.perf_counter() - start:.1f} s (not timed)")
+        start = time.perf_counter()
+        result = report.build_report(folder)
+        total = time.perf_counter() - start
+    stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
+    print(f"hersd-report on {count} runs: {total:.2f} s total ({stages}); budget {BUDGET_SECONDS:g} s")
+    return 0 if total < BUDGET_SECONDS else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+import math
+
+import numpy as np
+import pytest
+
+from hersd.config import ScheduleConfig
+from hersd.schedules import mean_rate_approx, mean_rate_exact, relabel_rate, schedule_mean_rate
+
+
+def test_constant_rate_is_eps_every_epoch():
+    schedule = ScheduleConfig(kind="constant", eps=0.8)
+    assert [relabel_rate(schedule, k, 200) for k in (1, 100, 200)] == [0.8, 0.8, 0.8]
+
+
+def test_linear_rate_by_hand():
+    schedule = ScheduleConfig(kind="linear", beta1=0.5)
+    # eps(k) = 1 - 0.5 * k / 4
+    assert [relabel_rate(schedule, k, 4) for k in range(1, 5)] == pytest.approx([0.875, 0.75, 0.625, 0.5])
+
+
+def test_exponential_rate_by_hand():
+    # exp(ln 2) = 2: eps(k) = 1 - 0.5 * (k / 4)^2
+    schedule = ScheduleConfig(kind="exponential", beta1=0.5, beta2=math.log(2))
+    assert [relabel_rate(schedule, k, 4) for k in range(1, 5)] == pytest.approx(
+        [1 - 0.5 / 16, 1 - 0.5 / 4, 1 - 0.5 * 9 / 16, 0.5])
+    # beta2 < 0 is convex: exp(-ln 2) = 1/2, eps(1) = 1 - 0.5 * (1/4)^0.5 = 0.75
+    convex = ScheduleConfig(kind="exponential", beta1=0.5, beta2=-math.log(2))
+    assert relabel_rate(convex, 1, 4) == pytest.approx(0.75)
+
+
+def test_final_rate_is_one_minus_beta1():
+    for beta2 in (-1.0, 0.0, 0.75):
+        assert relabel_rate(ScheduleConfig(kind="exponential", beta1=0.3, beta2=beta2), 50, 50) == pytest.approx(0.7)
+
+
+def test_mean_rate_exact_eq10_by_hand():
+    assert mean_rate_exact(0.5, 0.0, 4) == pytest.approx((0.875 + 0.75 + 0.625 + 0.5) / 4)
+    assert mean_rate_exact(0.5, math.log(2), 2) == pytest.approx((0.875 + 0.5) / 2)
+
+
+def test_mean_rate_approx_eq11_by_hand_and_as_limit():
+    assert mean_rate_approx(0.5, 0.0) == pytest.approx(0.75)
+    assert mean_rate_approx(0.5, math.log(2)) == pytest.approx(1 - 0.5 / 3)
+    # paper, Fig. 12: beta1 = beta2 = 0.5 lies in the optimal band [0.8, 0.889], 0.25 just above it
+    assert mean_rate_approx(0.5, 0.5) == pytest.approx(1 - 0.5 / (1 + np.exp(0.5)))
+    assert 0.8 <= mean_rate_approx(0.5, 0.5) <= 0.889 < mean_rate_approx(0.25, 0.25) < 0.891
+    assert mean_rate_exact(0.75, 0.5, 100_000) == pytest.approx(mean_rate_approx(0.75, 0.5), abs=1e-4)
+
+
+def test_schedule_mean_rate_dispatches_by_kind():
+    assert schedule_mean_rate(ScheduleConfig(kind="constant", eps=0.8), 200) == 0.8
+    assert schedule_mean_rate(ScheduleConfig(kind="linear", beta1=0.5), 4) == pytest.approx(0.6875)
+
+
+def test_epoch_index_outside_range_is_rejected():
+    with pytest.raises(ValueError):
+        relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 0, 4)
+    with pytest.raises(ValueError):
+        relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 5, 4)

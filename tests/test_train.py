@@ -1,0 +1,155 @@
+"""The training run end to end: determinism, resume, the log contract, bad input, learning."""
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hersd.runlog import EPOCH_FIELDS, read_run
+from hersd.train import compose, main, train
+
+TINY = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
+        "ddpg.batch_size=64", "quiet=true"]
+TIMING = [name for name in EPOCH_FIELDS if name.endswith("_seconds")]
+
+
+def metrics(log_path: Path) -> pd.DataFrame:
+    """Every logged metric except wall-clock timings."""
+    return read_run(log_path).epochs.drop(columns=TIMING)
+
+
+def test_same_seed_gives_identical_metrics(tmp_path):
+    first = train(compose([*TINY, "epochs=2", "seed=3", f"results_dir={tmp_path / 'a'}"]))
+    second = train(compose([*TINY, "epochs=2", "seed=3", f"results_dir={tmp_path / 'b'}"]))
+    other_seed = train(compose([*TINY, "epochs=2", "seed=4", f"results_dir={tmp_path / 'a'}"]))
+    pd.testing.assert_frame_equal(metrics(first), metrics(second))
+    assert not metrics(first).equals(metrics(other_seed))
+
+
+def test_log_holds_metadata_and_every_epoch(tmp_path):
+    cfg = compose([*TINY, "epochs=3", "schedule=linear", "schedule.beta1=0.5", f"results_dir={tmp_path}"])
+    log = read_run(train(cfg, command="hersd-train test"))
+    assert log.complete and not log.damaged
+    assert list(log.epochs["epoch"]) == [1, 2, 3]
+    assert np.allclose(log.epochs["relabel_rate"], [1 - 0.5 / 3, 1 - 1 / 3, 0.5])
+    shares = log.epochs[["share_hindsight", "share_real_success", "share_real_failure"]].sum(axis=1)
+    assert np.allclose(shares, 1.0)
+    assert list(log.epochs["env_steps"]) == [200, 400, 600]  # 2 cycles x 2 episodes x 50 steps
+    assert list(log.epochs["updates"]) == [10, 20, 30]
+    assert log.meta["config"]["schedule"] == {"kind": "linear", "eps": 0.8, "beta1": 0.5, "beta2": 0.0}
+    assert log.meta["command"] == "hersd-train test"
+    assert {"python", "torch", "mujoco", "gymnasium_robotics", "hersd"} <= set(log.meta["versions"])
+    assert log.meta["effective"]["gamma"] == pytest.approx(0.98)
+    assert not (log.path.parent / "checkpoint.pt").exists()  # removed once complete
+
+
+def test_rerunning_a_complete_run_does_nothing(tmp_path):
+    cfg = compose([*TINY, "epochs=1", f"results_dir={tmp_path}"])
+    log_path = train(cfg)
+    before = log_path.read_bytes()
+    assert train(cfg) == log_path and log_path.read_bytes() == before
+
+
+class StopHere(Exception):
+    pass
+
+
+def test_interrupted_run_resumes_to_the_uninterrupted_metrics(tmp_path):
+    reference = train(compose([*TINY, "epochs=4", f"results_dir={tmp_path / 'ref'}"]))
+    cfg = compose([*TINY, "epochs=4", f"results_dir={tmp_path / 'cut'}"])
+
+    def stop_after_epoch_2(record):
+        if record["epoch"] == 2:
+            raise StopHere
+
+    with pytest.raises(StopHere):
+        train(cfg, on_epoch=stop_after_epoch_2)
+    interrupted = read_run(next((tmp_path / "cut").rglob("run.mcap")))
+    assert not interrupted.complete and list(interrupted.epochs["epoch"]) == [1, 2]
+    resumed = train(cfg)
+    log = read_run(resumed)
+    assert log.complete and [s["resumed_from_epoch"] for s in log.sessions] == [0, 2]
+    pd.testing.assert_frame_equal(metrics(resumed), metrics(reference))
+
+
+def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
+    args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.train", *args], stdout=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if line.startswith("epoch") and line.split()[1].startswith("2/"):
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    log_path = next((tmp_path / "cut").rglob("run.mcap"))
+    killed = read_run(log_path)
+    assert not killed.complete and 2 <= len(killed.epochs) <= 3
+    subprocess.run([sys.executable, "-m", "hersd.train", *args], check=True, capture_output=True)
+    reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
+    assert read_run(log_path).complete
+    pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
+
+
+def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
+    log_path = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path}"]))
+    data = log_path.read_bytes()
+    full = read_run(log_path)
+    # cut inside the last epoch's record: the status message and footer follow it
+    cut = log_path.with_name("cut.mcap")
+    last_epoch_at = data.rfind(b'{"epoch": 3')
+    cut.write_bytes(data[:last_epoch_at + 20])
+    damaged = read_run(cut)
+    assert damaged.damaged and not damaged.complete
+    pd.testing.assert_frame_equal(damaged.epochs, full.epochs.iloc[:2])
+
+
+@pytest.mark.parametrize("override, field", [
+    ("schedule.beta1=1.5", "schedule.beta1"),
+    ("schedule.beta1=-0.1", "schedule.beta1"),
+    ("schedule.beta1=nan", "schedule.beta1"),
+    ("schedule.beta2=inf", "schedule.beta2"),
+    ("task=cartpole", "task"),
+    ("algo.goal_strategy=nearest", "algo.goal_strategy"),
+    ("schedule=cosine", "schedule"),
+    ("epochs=0", "epochs"),
+    ("epochs=ten", "epochs"),
+    ("no_such_key=1", "no_such_key"),
+])
+def test_bad_input_is_one_line_naming_the_field_with_exit_2(tmp_path, capsys, override, field):
+    with pytest.raises(SystemExit) as exit_info:
+        main([override, f"results_dir={tmp_path}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err, err
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_unknown_choice_lists_the_valid_ones(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["task=cartpole", f"results_dir={tmp_path}"])
+    assert "pick_and_place, push, reach, slide" in capsys.readouterr().err
+
+
+def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, f"results_dir={blocker}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "results_dir" in err and len(err.strip().splitlines()) == 1
+    assert blocker.read_text() == "not a folder"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fetch_reach_learns_within_5_epochs(tmp_path, seed):
+    """Paper settings on FetchReach (10 cycles/epoch): test success >= 0.9 within 5 epochs."""
+    log = read_run(train(compose(["task=reach", "epochs=5", f"seed={seed}", "quiet=true",
+                                  f"results_dir={tmp_path}"])))
+    assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()
