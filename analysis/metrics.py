@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from analysis.load import schedule_label
 from hersd.config import ScheduleConfig
 from hersd.schedules import mean_rate_approx, mean_rate_exact, relabel_rate
 
@@ -194,20 +195,23 @@ def mean_q(epochs: pd.DataFrame) -> pd.DataFrame:
 
 
 def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
-    """eps(k) for k = 1..K of every distinct (config, schedule, K) among the runs.
+    """eps(k) for k = 1..K of every distinct schedule (kind, eps, beta1, beta2, K) among the runs.
 
-    Returns columns config, schedule, total_epochs, epoch, eps.
+    Returns columns label (:func:`schedule_label`), schedule, eps_setting, beta1, beta2,
+    total_epochs, epoch, eps; in the order constant, linear, exponential, then by beta1, beta2.
     """
-    distinct = runs.drop_duplicates(["config", "schedule", "eps", "beta1", "beta2", "total_epochs"])
+    settings = ["schedule", "eps", "beta1", "beta2", "total_epochs"]
+    distinct = runs[settings].drop_duplicates()
+    distinct = distinct.assign(order=distinct["schedule"].map({"constant": 0, "linear": 1, "exponential": 2}))
     frames = []
-    for run in distinct.itertuples(index=False):
+    for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "total_epochs"]).itertuples(index=False):
         schedule = ScheduleConfig(kind=run.schedule, eps=run.eps, beta1=run.beta1, beta2=run.beta2)
         k = np.arange(1, run.total_epochs + 1)
-        frames.append(pd.DataFrame({"config": run.config, "schedule": run.schedule, "total_epochs": run.total_epochs,
-                                    "epoch": k, "eps": [relabel_rate(schedule, int(i), run.total_epochs) for i in k]}))
-    table = pd.concat(frames, ignore_index=True)
-    table["config"] = pd.Categorical(table["config"], categories=runs["config"].cat.categories, ordered=True)
-    return table.sort_values(["config", "total_epochs", "epoch"]).reset_index(drop=True)
+        frames.append(pd.DataFrame({
+            "label": schedule_label(run.schedule, run.eps, run.beta1, run.beta2), "schedule": run.schedule,
+            "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2, "total_epochs": run.total_epochs,
+            "epoch": k, "eps": [relabel_rate(schedule, int(i), run.total_epochs) for i in k]}))
+    return pd.concat(frames, ignore_index=True)
 
 
 def mean_rate_lines(beta2_values: list[float], total_epochs: int, points: int = 101) -> pd.DataFrame:

@@ -123,8 +123,10 @@ def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, run
 
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
                  algos: Sequence[str] | None = None, window: int = DEFAULT_WINDOW, fmt: str = "png",
-                 log: Callable[[str], None] = print) -> ReportResult:
-    """Load, compute, draw and write the report; ``log`` receives progress lines.
+                 log: Callable[[str], None] = print,
+                 warn: Callable[[str], None] = lambda line: print(line, file=sys.stderr)) -> ReportResult:
+    """Load, compute, draw and write the report; ``log`` receives progress lines, ``warn``
+    one line per skipped log.
 
     Raises :class:`ReportInputError` for input that cannot make a report.
     """
@@ -139,7 +141,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     start = time.perf_counter()
     table = load_runs(folder, tasks=tasks, algos=algos)
     for line in table.skipped:
-        log(f"warning: skipped unreadable log {line}")
+        warn(f"warning: skipped unreadable log {line}")
     runs = table.runs
     if not (runs["epochs_done"] > 0).any():
         raise ReportInputError(f"none of the {len(runs)} runs under {folder} has a completed epoch yet")
