@@ -86,8 +86,9 @@ class DDPG:
         self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units)
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
-        self.actor_optim = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
-        self.critic_optim = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
+        # One Adam over both networks (one parameter group each): a single fused step per update.
+        self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
+                                           {"params": self.critic.parameters(), "lr": cfg.critic_lr}], fused=True)
 
     def _inputs(self, obs: np.ndarray, goal: np.ndarray) -> torch.Tensor:
         """Raw obs (B, obs_dim) and goal (B, goal_dim) -> normalised actor input (B, obs_dim + goal_dim)."""
@@ -119,7 +120,12 @@ class DDPG:
         return np.where(take_random, random_action, action)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
-        """One critic step then one actor step on a batch of B transitions."""
+        """One simultaneous actor and critic step on a batch of B transitions.
+
+        As in the reference code, both losses are computed with the current networks and
+        both optimisers then step: the actor's loss sees the critic through detached
+        parameters, so only the critic loss moves the critic.
+        """
         inputs = self._inputs(batch.obs, batch.goal)
         next_inputs = self._inputs(batch.next_obs, batch.goal)
         action = torch.from_numpy(batch.action) / self.max_action
@@ -130,18 +136,13 @@ class DDPG:
             target_q = torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
         q = self.critic(torch.cat([inputs, action], dim=1))
         critic_loss = torch.mean(torch.square(target_q - q))
-        self.critic_optim.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_optim.step()
-
         policy_action = torch.tanh(self.actor(inputs))  # = pi(s) / max_action
-        self.critic.requires_grad_(False)
-        actor_loss = (-self.critic(torch.cat([inputs, policy_action], dim=1)).mean()
-                      + self.cfg.action_l2 * torch.mean(torch.square(policy_action)))
-        self.actor_optim.zero_grad(set_to_none=True)
-        actor_loss.backward()
-        self.actor_optim.step()
-        self.critic.requires_grad_(True)
+        frozen_critic = {name: p.detach() for name, p in self.critic.named_parameters()}
+        policy_q = torch.func.functional_call(self.critic, frozen_critic, (torch.cat([inputs, policy_action], dim=1),))
+        actor_loss = -policy_q.mean() + self.cfg.action_l2 * torch.mean(torch.square(policy_action))
+        self.optimizer.zero_grad(set_to_none=True)
+        (critic_loss + actor_loss).backward()
+        self.optimizer.step()
         q = q.detach()
         return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item())
 
@@ -153,8 +154,7 @@ class DDPG:
 
     def state_dict(self) -> dict:
         return {name: getattr(self, name).state_dict() for name in
-                ("actor", "critic", "actor_target", "critic_target", "actor_optim", "critic_optim",
-                 "obs_norm", "goal_norm")}
+                ("actor", "critic", "actor_target", "critic_target", "optimizer", "obs_norm", "goal_norm")}
 
     def load_state_dict(self, state: dict) -> None:
         for name, value in state.items():

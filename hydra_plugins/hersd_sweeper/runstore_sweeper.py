@@ -1,0 +1,38 @@
+"""``hydra/sweeper=runstore``: Hydra's basic grid sweeper, aware of hersd's run store.
+
+Hydra only discovers plugins inside the ``hydra_plugins`` package, so this thin module
+lives here; the logic it calls is in :mod:`sweeps.launch`.
+"""
+
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.config_store import ConfigStore
+
+
+@dataclass
+class RunStoreSweeperConf:
+    _target_: str = "hydra_plugins.hersd_sweeper.runstore_sweeper.RunStoreSweeper"
+    max_batch_size: Optional[int] = None  # jobs handed to the launcher at once (null: all)
+    params: Optional[Dict[str, str]] = field(default=None)  # the grid: override key -> comma list
+    dry_run: bool = False  # list the runs and their state without running them
+
+
+ConfigStore.instance().store(group="hydra/sweeper", name="runstore", node=RunStoreSweeperConf, provider="hersd")
+
+
+class RunStoreSweeper(BasicSweeper):
+    """Expands the grid like BasicSweeper, then checks, lists or launches the runs and
+    ends with a summary (see :func:`sweeps.launch.sweep_runs`)."""
+
+    def __init__(self, max_batch_size: Optional[int], params: Optional[Dict[str, str]] = None,
+                 dry_run: bool = False) -> None:
+        super().__init__(max_batch_size=max_batch_size, params=params)
+        self.dry_run = dry_run
+
+    def sweep(self, arguments: List[str]) -> Any:
+        from sweeps.launch import sweep_runs
+
+        return sweep_runs(self, arguments)

@@ -1,0 +1,1 @@
+"""Sweeps and searches over training runs: grids through Hydra launchers, Optuna studies."""

@@ -1,0 +1,183 @@
+"""``hersd-sweep``: many training runs (a grid x tasks x seeds) through a Hydra launcher.
+
+Data flow: ``conf/sweep.yaml`` (+ ``conf/grid/<name>.yaml`` and command-line overrides) ->
+the ``runstore`` sweeper (``hydra_plugins/hersd_sweeper``) expands the grid and calls
+:func:`sweep_runs`, which composes and checks every run before any starts, skips the
+complete ones, and hands the rest to the launcher (joblib locally, one job per core;
+submitit for SLURM). Each job calls :func:`run_job`, i.e. ``hersd.train.train`` on its own
+config; the run store (one directory per config, a lock, checkpoints) makes re-running a
+sweep finish what is missing and nothing else.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import traceback
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf, open_dict
+
+from hersd.config import ConfigError, TrainConfig, to_train_config
+from hersd.runs import run_dir
+
+PROGRESS_NAME = "progress.jsonl"
+PLAN_NAME = "sweep.json"
+
+
+@dataclass
+class SweepConfig(TrainConfig):
+    seeds: int = 5  # grids sweep ``seed`` over range(seeds)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.seeds < 1:
+            raise ConfigError(f"seeds must be >= 1, got {self.seeds}")
+
+
+class SweepError(RuntimeError):
+    """A sweep cannot start (a run's config is invalid) or ended with failed runs."""
+
+
+def register_schemas() -> None:
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(name="sweep_schema", node=SweepConfig)
+
+
+def job_train_config(cfg: DictConfig) -> TrainConfig:
+    """A composed sweep job config (with or without its ``hydra`` node) -> its TrainConfig."""
+    cfg = cfg.copy()
+    if "hydra" in cfg:
+        with open_dict(cfg):
+            del cfg["hydra"]
+    sweep_cfg = to_train_config(cfg)
+    return TrainConfig(**{f.name: getattr(sweep_cfg, f.name) for f in fields(TrainConfig)})
+
+
+def run_state(directory: Path) -> str:
+    """``complete``, ``resumable`` (a checkpoint exists) or ``new``."""
+    from hersd.runlog import LOG_NAME, RunLogError, read_run
+
+    log_path = directory / LOG_NAME
+    if log_path.exists():
+        try:
+            if read_run(log_path).complete:
+                return "complete"
+        except RunLogError:
+            pass
+    return "resumable" if (directory / "checkpoint.pt").exists() else "new"
+
+
+# --------------------------------------------------------------------------- in the sweeping process
+def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
+    """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.core.utils import JobStatus
+
+    parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
+    overrides = parser.parse_overrides(sweeper._parse_config() + list(arguments))
+    jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
+
+    planned: dict[Path, list[str]] = {}  # run dir -> overrides; a grid naming a run twice runs it once
+    for job in jobs:
+        job_cfg = sweeper.hydra_context.config_loader.load_sweep_config(sweeper.config, job)
+        try:
+            planned.setdefault(run_dir(job_train_config(job_cfg)), job)
+        except ConfigError as err:
+            raise SweepError(f"run [{' '.join(job)}]: {err}") from None
+    states = {directory: run_state(directory) for directory in planned}
+    counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
+    print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
+          f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
+    if sweeper.dry_run:
+        for directory, job in planned.items():
+            print(f"  {states[directory]:<9} {directory}  [{' '.join(job)}]")
+        return []
+
+    to_launch = [job for directory, job in planned.items() if states[directory] != "complete"]
+    if not to_launch:
+        return []
+    sweep_dir = Path(sweeper.config.hydra.sweep.dir)
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
+    results = sweeper.launcher.launch(to_launch, initial_job_idx=0)
+
+    outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": []}
+    for job, result in zip(to_launch, results):
+        if result.status == JobStatus.FAILED:
+            outcomes["failed"].append(f"[{' '.join(job)}]: {result._return_value}")
+        else:
+            outcome = result.return_value
+            detail = outcome["run_dir"] + (f" (see {outcome['error_log']})" if outcome.get("error_log") else "")
+            outcomes[outcome["status"]].append(detail)
+    print(f"sweep finished: {len(outcomes['done'])} done, {counts['complete']} skipped (complete), "
+          f"{len(outcomes['resumed'])} resumed, {len(outcomes['busy'])} running elsewhere, "
+          f"{len(outcomes['failed'])} failed", flush=True)
+    for line in outcomes["failed"]:
+        print(f"  failed: {line}", flush=True)
+    if outcomes["failed"]:
+        raise SweepError(f"{len(outcomes['failed'])} run(s) failed; fix the cause and run the same command "
+                         f"again (finished runs are kept and skipped)")
+    return [results]
+
+
+# --------------------------------------------------------------------------- in each job process
+def run_job(cfg: DictConfig) -> dict[str, Any]:
+    """Train one run of the sweep; never raises, so one failure does not stop the others."""
+    from hydra.core.hydra_config import HydraConfig
+
+    from hersd.train import RunLockedError, train
+
+    hydra_cfg = HydraConfig.get()
+    train_cfg = job_train_config(cfg)
+    directory = run_dir(train_cfg)
+    state = run_state(directory)
+    outcome: dict[str, Any] = {"run_dir": str(directory)}
+    tic = time.time()
+    try:
+        train(train_cfg, command=" ".join(["hersd-sweep", *hydra_cfg.overrides.task]))
+        outcome["status"] = "resumed" if state == "resumable" else "done"
+    except RunLockedError:
+        outcome["status"] = "busy"
+    except Exception:  # noqa: BLE001 - any failure is this run's alone; it is reported, the sweep goes on
+        error_log = directory / "error.log"
+        error_log.parent.mkdir(parents=True, exist_ok=True)
+        error_log.write_text(traceback.format_exc())
+        outcome.update(status="failed", error_log=str(error_log))
+    _report_progress(Path(hydra_cfg.sweep.dir), outcome, time.time() - tic)
+    return outcome
+
+
+def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -> None:
+    """Append this run's outcome to the sweep's progress file and print runs done / total and ETA."""
+    line = json.dumps({**outcome, "seconds": seconds}) + "\n"
+    with open(sweep_dir / PROGRESS_NAME, "a") as progress:
+        progress.write(line)
+    finished = len((sweep_dir / PROGRESS_NAME).read_text().splitlines())
+    plan_path = sweep_dir / PLAN_NAME
+    plan = json.loads(plan_path.read_text()) if plan_path.exists() else {"runs": finished, "start": time.time()}
+    elapsed = time.time() - plan["start"]
+    remaining = max(plan["runs"] - finished, 0)
+    eta = time.strftime("%H:%M:%S", time.gmtime(elapsed / finished * remaining)) if finished else "?"
+    print(f"[sweep {finished}/{plan['runs']}] {outcome['status']:<7} {outcome['run_dir']} "
+          f"({seconds:.0f} s)  ETA {eta}", flush=True)
+
+
+def main() -> None:
+    """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs."""
+    import hydra
+
+    from hersd.config import register_schemas as register_train_schema
+    from hersd.train import CONF_DIR
+
+    if "--dry-run" in sys.argv:
+        sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
+    register_train_schema()
+    register_schemas()
+    os.environ.setdefault("HYDRA_FULL_ERROR", "0")
+    hydra.main(config_path=str(CONF_DIR), config_name="sweep", version_base="1.3")(run_job)()
