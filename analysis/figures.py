@@ -14,9 +14,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib import colormaps  # noqa: E402
+from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
@@ -381,7 +381,7 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
         width, height = figure.get_size_inches()
         bottom, top = axes[-1].get_position().y0, axes[0].get_position().y1
         colour_axis = figure.add_axes(((width - 1.0) / width, bottom, 0.15 / width, top - bottom))
-        colourbar = figure.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=success_colours), cax=colour_axis)
+        colourbar = figure.colorbar(ScalarMappable(norm=norm, cmap=success_colours), cax=colour_axis)
         colourbar.set_label("final median test success")
         caption = (f"{task_title(task)}: mean relabel rate μ_ε over training against β1, one line per β2 of the runs "
                    "(solid: exact mean over K epochs, eq. 10; dotted: continuous approximation, eq. 11). The grey "
