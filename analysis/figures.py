@@ -21,10 +21,10 @@ from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from analysis import metrics  # noqa: E402
+from analysis.load import task_rank  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 
 TASK_TITLES = {"reach": "FetchReach", "push": "FetchPush", "pick_and_place": "FetchPickAndPlace", "slide": "FetchSlide"}
-TASK_ORDER = list(TASK_TITLES)  # the paper's order; other tasks follow alphabetically
 OPTIMAL_BAND = (0.8, 0.889)  # the best fixed eps of the HER paper; the seed paper's target for mu_eps
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
@@ -54,7 +54,7 @@ def task_title(task: str) -> str:
 
 def ordered_tasks(tasks) -> list[str]:
     """Tasks in the paper's order (reach, push, pick_and_place, slide), others after, alphabetically."""
-    return sorted(set(tasks), key=lambda task: (TASK_ORDER.index(task) if task in TASK_ORDER else len(TASK_ORDER), task))
+    return sorted(set(tasks), key=task_rank)
 
 
 def _config_table(analysis: Analysis) -> pd.DataFrame:

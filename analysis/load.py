@@ -47,6 +47,12 @@ RUN_COLUMNS = (
 # Config fields that change neither what a run computes nor which configuration it belongs to.
 _NOT_CONFIGURATION = ("seed", "results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint")
 _SCHEDULE_ORDER = {"constant": 0, "linear": 1, "exponential": 2}
+TASK_ORDER = ("reach", "push", "pick_and_place", "slide")  # the paper's order; other tasks follow alphabetically
+
+
+def task_rank(task: str) -> tuple[int, str]:
+    """Sort key putting tasks in TASK_ORDER, unknown ones after it alphabetically."""
+    return (TASK_ORDER.index(task) if task in TASK_ORDER else len(TASK_ORDER), task)
 
 
 class ReportInputError(ValueError):

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.load import schedule_label
+from analysis.load import schedule_label, task_rank
 from hersd.config import ScheduleConfig
 from hersd.schedules import mean_rate_approx, mean_rate_exact, relabel_rate
 
@@ -152,8 +152,11 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, baseline: str = BASE
                                         if task in baseline_finals else float("nan"))
         rows.append(row)
     table = pd.DataFrame.from_records(rows)
+    for threshold in SUCCESS_THRESHOLDS:
+        table[f"epochs_to_{threshold:g}"] = table[f"epochs_to_{threshold:g}"].astype("Int64")  # empty when never
     table["config"] = pd.Categorical(table["config"], categories=curves["config"].cat.categories, ordered=True)
-    return table.sort_values(GROUP).reset_index(drop=True)
+    table["task_rank"] = table["task"].map(task_rank)
+    return table.sort_values(["task_rank", "config"]).drop(columns="task_rank").reset_index(drop=True)
 
 
 def aggregate_table(curves: pd.DataFrame, baseline: str = BASELINE, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:

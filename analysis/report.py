@@ -65,7 +65,13 @@ def markdown_table(table: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}" + ("" if number == 1 else "s")
+
+
 def _cell(value) -> str:
+    if value is pd.NA:
+        return ""
     if isinstance(value, float):
         return "" if math.isnan(value) else f"{value:.3f}"
     return str(value)
@@ -102,8 +108,9 @@ def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, run
                figures: list[tuple[ReportFigure, str]], window: int, skipped: list[str]) -> str:
     incomplete = int((~runs["complete"]).sum())
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
-             f"<p>{len(runs)} runs ({incomplete} incomplete), {runs['task'].nunique()} tasks, "
-             f"{runs['config'].nunique()} configurations; test success smoothed over {window} epochs.</p>"]
+             f"<p>{_count(len(runs), 'run')} ({incomplete} incomplete), {_count(runs['task'].nunique(), 'task')}, "
+             f"{_count(runs['config'].nunique(), 'configuration')}; test success smoothed over "
+             f"{_count(window, 'epoch')}.</p>"]
     if skipped:
         parts.append("<p>Skipped unreadable logs:</p><ul>"
                      + "".join(f"<li>{html.escape(line)}</li>" for line in skipped) + "</ul>")
@@ -146,9 +153,9 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     if not (runs["epochs_done"] > 0).any():
         raise ReportInputError(f"none of the {len(runs)} runs under {folder} has a completed epoch yet")
     timings["load"] = time.perf_counter() - start
-    log(f"loaded {len(runs)} runs ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} skipped), "
-        f"{len(table.epochs)} epochs, {runs['task'].nunique()} tasks, {runs['config'].nunique()} configurations "
-        f"in {timings['load']:.1f} s")
+    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} skipped), "
+        f"{_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
+        f"{_count(runs['config'].nunique(), 'configuration')} in {timings['load']:.1f} s")
 
     start = time.perf_counter()
     analysis = analyse(runs, table.epochs, window)
@@ -166,7 +173,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         saved.append(path)
         embedded.append((figure, _embedded(figure, fmt, path)))
     timings["figures"] = time.perf_counter() - start
-    log(f"drew {len(drawn)} figures in {timings['figures']:.1f} s")
+    log(f"drew {_count(len(drawn), 'figure')} in {timings['figures']:.1f} s")
 
     start = time.perf_counter()
     tables = _write_tables({"summary": analysis.summary, "aggregate": analysis.aggregate,

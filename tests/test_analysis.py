@@ -98,7 +98,7 @@ def test_summary_row_equals_hand_values(analysed):
     assert her["auc"] == pytest.approx(sum(HER_MEDIAN) / 6)  # (0 + .15 + .3 + .5333 + .6 + .8) / 6 = 0.39722
     assert her["auc"] == pytest.approx(0.397222, abs=1e-6)
     assert her["epochs_to_0.5"] == 4
-    assert math.isnan(her["epochs_to_0.9"])
+    assert pd.isna(her["epochs_to_0.9"])  # never reached: an empty cell
     assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)  # drop 0.4 and 1.0
     assert her["iqm_low"] <= her["iqm"] <= her["iqm_high"]
     assert her["p_improve_HER"] == pytest.approx(0.5)
@@ -107,6 +107,19 @@ def test_summary_row_equals_hand_values(analysed):
     assert linear["epochs_to_0.5"] == 1
     # 0.95 beats four of the five HER finals (not 1.0); 0.2 beats none.
     assert linear["p_improve_HER"] == pytest.approx(4 / 10)
+
+
+def test_unfinished_seed_sets_the_horizon(tmp_path):
+    for seed in (0, 1):
+        write_run(tmp_path / str(seed), make_config(seed=seed), np.array(HER_SUCCESS[seed]))
+    write_run(tmp_path / "2", make_config(seed=2), np.array(HER_SUCCESS[2][:4]), complete=False)  # still running
+    table = load_runs(tmp_path)
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    row = analysis.summary.iloc[0]
+    assert (row["seeds"], row["complete"], row["horizon"]) == (3, 2, 4)
+    assert row["final_median"] == pytest.approx(0.3)  # smoothed at epoch 4: 0.3, 0.5333, 0.1
+    assert row["auc"] == pytest.approx((0 + 0 + 0.1 + 0.3) / 4)  # medians 0, 0, 0.1, 0.3
+    assert analysis.medians["n_seeds"].tolist() == [3, 3, 3, 3, 2, 2]
 
 
 def test_probability_of_improvement_counts_ties_half():

@@ -1,0 +1,203 @@
+"""Figures and tables of an Optuna beta search (``hersd-search``).
+
+- ``<study>_beta_plane.png``: every trial in the (beta1, beta2) plane over the mu_eps
+  iso-lines of eq. 11 (mu_eps = 1 - beta1 / (1 + exp(beta2))) with the band
+  0.8 <= mu_eps <= 0.889 shaded (the seed paper's Fig. 12 region); complete trials are
+  filled dots coloured by their objective, pruned ones open circles coloured by their last
+  report, failed ones crosses; the best trial is starred. Linear-schedule trials sit on
+  beta2 = 0; constant-schedule trials have no place in the plane and are only counted.
+- ``<study>_best_trials.csv`` / ``.md``: the best complete trials, with mu_eps exact over
+  the study's epochs (eq. 10) and by eq. 11, and their run directories.
+
+:func:`study_figures` draws these for every study in a storage (or one). Needs optuna,
+pandas and matplotlib, not torch or MuJoCo.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import optuna  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib import colormaps  # noqa: E402
+from matplotlib.colors import Normalize  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from optuna.trial import TrialState  # noqa: E402
+
+from hersd.schedules import mean_rate_approx  # noqa: E402
+from sweeps.search import mean_rates, open_storage, storage_location  # noqa: E402
+
+MU_EPS_BAND = (0.8, 0.889)  # the HER paper's two best fixed rates; the seed paper's target for mu_eps
+ISO_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.889, 0.95)
+DEFAULT_BETA2_RANGE = (-2.0, 2.0)
+SCHEDULE_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
+COLUMNS = ["trial", "state", "value", "kind", "beta1", "beta2", "eps", "lambda_h", "mu_eps", "mu_eps_approx",
+           "in_band", "last_step", "retry_of", "duration_s", "run_dirs"]
+
+
+def _schedule_kind(params: dict) -> str | None:
+    """The trial's schedule kind: its ``kind`` parameter, else implied by which betas it has."""
+    if "kind" in params:
+        return params["kind"]
+    if "eps" in params:
+        return "constant"
+    if "beta2" in params:
+        return "exponential"
+    return "linear" if "beta1" in params else None
+
+
+def trials_frame(study: optuna.Study) -> pd.DataFrame:
+    """One row per trial (waiting trials left out); mu_eps exact over the study's epochs."""
+    epochs = study.user_attrs.get("settings", {}).get("epochs")
+    rows = []
+    for trial in study.get_trials(deepcopy=False):
+        if trial.state == TrialState.WAITING:
+            continue
+        params = dict(trial.params)
+        kind = _schedule_kind(params)
+        row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
+               "beta1": params.get("beta1"), "beta2": params.get("beta2", 0.0 if kind == "linear" else None),
+               "eps": params.get("eps"), "lambda_h": params.get("lambda_h"), "last_step": trial.last_step,
+               "retry_of": trial.user_attrs.get("retry_of"),
+               "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
+               "run_dirs": ";".join(trial.user_attrs.get("run_dirs", []))}
+        if kind is not None and set(SCHEDULE_PARAMS[kind]) <= set(params):
+            exact, approx = mean_rates({**params, "kind": kind}, epochs or 1)
+            row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
+                       in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])
+        rows.append(row)
+    return pd.DataFrame.from_records(rows, columns=COLUMNS).astype(
+        {name: "float64" for name in ("value", "beta1", "beta2", "eps", "lambda_h", "mu_eps", "mu_eps_approx",
+                                      "duration_s")})
+
+
+def best_trials(frame: pd.DataFrame, top: int = 10) -> pd.DataFrame:
+    """The ``top`` complete trials by value, best first, with a rank column; empty columns dropped."""
+    best = frame[frame["state"] == "complete"].sort_values(["value", "trial"], ascending=[False, True]).head(top)
+    best = best.drop(columns=["state", "last_step"]).dropna(axis=1, how="all")
+    best.insert(0, "rank", range(1, len(best) + 1))
+    return best.reset_index(drop=True)
+
+
+def _beta2_range(study: optuna.Study, frame: pd.DataFrame) -> tuple[float, float]:
+    bounds = [(d.low, d.high) for t in study.get_trials(deepcopy=False) for name, d in t.distributions.items()
+              if name == "beta2"]
+    if bounds:
+        return min(low for low, _ in bounds), max(high for _, high in bounds)
+    values = frame["beta2"].dropna()
+    if values.empty:
+        return DEFAULT_BETA2_RANGE
+    return min(DEFAULT_BETA2_RANGE[0], values.min()), max(DEFAULT_BETA2_RANGE[1], values.max())
+
+
+def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title: str,
+                    value_label: str = "objective") -> Figure:
+    """The trials over the eq. 11 iso-lines of mu_eps, the band shaded, coloured by value."""
+    fig = Figure(figsize=(7.0, 5.0), layout="constrained")
+    ax = fig.add_subplot()
+    beta1_grid, beta2_grid = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(*beta2_range, 201))
+    mu = mean_rate_approx(beta1_grid, beta2_grid)
+    ax.contourf(beta1_grid, beta2_grid, mu, levels=list(MU_EPS_BAND), colors=["tab:green"], alpha=0.18)
+    lines = ax.contour(beta1_grid, beta2_grid, mu, levels=list(ISO_LEVELS), colors="0.45",
+                       linewidths=[1.6 if level in MU_EPS_BAND else 0.8 for level in ISO_LEVELS])
+    ax.clabel(lines, fmt=lambda level: f"{level:g}", fontsize=8)
+
+    in_plane = frame[frame["kind"].isin(["linear", "exponential"]) & frame["beta1"].notna()]
+    scored = in_plane[in_plane["state"].isin(["complete", "pruned"])]
+    finite = scored["value"][np.isfinite(scored["value"])]
+    norm = Normalize(finite.min(), finite.max()) if not finite.empty else Normalize(0.0, 1.0)
+    if norm.vmin == norm.vmax:
+        norm = Normalize(norm.vmin - 0.5, norm.vmax + 0.5)
+    cmap = colormaps["viridis"]
+    complete = in_plane[in_plane["state"] == "complete"]
+    pruned = in_plane[in_plane["state"] == "pruned"]
+    failed = in_plane[in_plane["state"] == "fail"]
+    dots = ax.scatter(complete["beta1"], complete["beta2"], c=complete["value"], cmap=cmap, norm=norm, s=46,
+                      edgecolors="black", linewidths=0.5, zorder=3)
+    ax.scatter(pruned["beta1"], pruned["beta2"], facecolors="none", s=46, linewidths=1.6, zorder=3,
+               edgecolors=[cmap(norm(v)) if np.isfinite(v) else "0.5" for v in pruned["value"]])
+    ax.scatter(failed["beta1"], failed["beta2"], marker="x", color="tab:red", s=40, zorder=3)
+    if not complete.empty:
+        best = complete.loc[complete["value"].idxmax()]
+        ax.scatter([best["beta1"]], [best["beta2"]], marker="*", s=320, facecolors="none", edgecolors="black",
+                   linewidths=1.2, zorder=4)
+    fig.colorbar(dots, ax=ax, label=value_label)
+
+    handles = [Patch(facecolor="tab:green", alpha=0.18, label=f"{MU_EPS_BAND[0]} <= mu_eps <= {MU_EPS_BAND[1]} (eq. 11)"),
+               Line2D([], [], color="0.45", lw=0.8, label="mu_eps iso-lines (eq. 11)"),
+               Line2D([], [], ls="", marker="o", color="0.5", mec="black", label=f"complete ({len(complete)})"),
+               Line2D([], [], ls="", marker="o", mfc="none", mec="0.5", mew=1.6,
+                      label=f"pruned ({len(pruned)}; colour: last report)"),
+               Line2D([], [], ls="", marker="x", color="tab:red", label=f"failed ({len(failed)})"),
+               Line2D([], [], ls="", marker="*", mfc="none", mec="black", ms=12, label="best")]
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, fontsize=8, frameon=False)
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_ylim(*beta2_range)
+    ax.set_xlabel("beta1 (eq. 9: final drop of the relabel rate)")
+    ax.set_ylabel("beta2 (eq. 9: shape; 0 = linear)")
+    others = len(frame) - len(in_plane)
+    ax.set_title(title + (f"\n({others} trial(s) without beta1/beta2 not shown)" if others else ""), fontsize=10)
+    return fig
+
+
+def markdown_table(frame: pd.DataFrame) -> str:
+    """A pipe table; floats to 4 significant digits, missing values blank."""
+    def cell(value: object) -> str:
+        if value is None or (isinstance(value, float) and np.isnan(value)):
+            return ""
+        if isinstance(value, (float, np.floating)):
+            return f"{value:.4g}"
+        return str(value)
+
+    lines = ["| " + " | ".join(frame.columns) + " |", "|" + "---|" * len(frame.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    return "\n".join(lines) + "\n"
+
+
+def _open_existing_storage(storage_url_or_db_path: str | Path) -> optuna.storages.BaseStorage:
+    spec = str(storage_url_or_db_path)
+    kind, location = storage_location(spec)
+    path = location if kind == "journal" else location[len("sqlite:///"):] if location.startswith("sqlite:///") else None
+    if path is not None and not Path(path).exists():
+        raise FileNotFoundError(f"{path}: no such study storage")
+    return open_storage(spec)
+
+
+def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study_name: str | None = None,
+                  top: int = 10) -> list[Path]:
+    """Draw the beta-plane figure and the best-trials tables of each study in the storage
+    (or only ``study_name``) into ``out_dir``; -> the files written.
+
+    ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a SQLAlchemy
+    URL, or ``journal:<path>``.
+    """
+    storage = _open_existing_storage(storage_url_or_db_path)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    names = [study_name] if study_name is not None else sorted(optuna.get_all_study_names(storage))
+    written: list[Path] = []
+    for name in names:
+        study = optuna.load_study(study_name=name, storage=storage)
+        frame = trials_frame(study)
+        settings = study.user_attrs.get("settings", {})
+        value_label = (f"{settings['objective']} of {settings['metric']}, mean of {settings['seeds']} seed(s)"
+                       if settings else "objective")
+        figure = plot_beta_plane(frame, _beta2_range(study, frame), f"{name}: {len(frame)} trials", value_label)
+        figure_path = out_dir / f"{name}_beta_plane.png"
+        figure.savefig(figure_path, dpi=150)
+        best = best_trials(frame, top)
+        csv_path = out_dir / f"{name}_best_trials.csv"
+        best.to_csv(csv_path, index=False)
+        md_path = out_dir / f"{name}_best_trials.md"
+        md_path.write_text(f"# Best trials of study `{name}`\n\n{value_label}; mu_eps exact over the study's "
+                           f"epochs (eq. 10) and by eq. 11.\n\n"
+                           + markdown_table(best.drop(columns=["run_dirs"], errors="ignore")))
+        written += [figure_path, csv_path, md_path]
+    return written
