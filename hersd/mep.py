@@ -17,7 +17,9 @@ What differs from the original code, and why (the quantities computed are the sa
   trajectory keeps a small non-zero probability instead of never being replayed.
 
 The functions are pure; :class:`EpisodePrioritizer` holds the fitted model and the rarity
-array for the training loop and its checkpoint.
+array for the training loop and its checkpoint. Fitting and scoring use one BLAS thread, as
+the rest of a run uses one torch thread: runs of a sweep share the cores, and an
+oversubscribed multi-threaded BLAS made a fit ten times slower on a loaded 2-core machine.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 from scipy.stats import rankdata
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import BayesianGaussianMixture
+from threadpoolctl import threadpool_limits
 
 from hersd.config import MEPConfig
 
@@ -55,7 +58,7 @@ def fit_density(model: BayesianGaussianMixture, achieved: np.ndarray, fit_subsam
     """
     rows = achieved if achieved.shape[0] <= fit_subsample else \
         achieved[np.sort(rng.choice(achieved.shape[0], size=fit_subsample, replace=False))]
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), threadpool_limits(limits=1):
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(trajectory_features(rows))
     return model
@@ -66,7 +69,9 @@ def trajectory_rarity(model: BayesianGaussianMixture, achieved: np.ndarray) -> n
 
     A non-finite density (a trajectory far outside the fitted data) counts as the rarest.
     """
-    return np.nan_to_num(-model.score_samples(trajectory_features(achieved)), nan=np.inf)
+    with threadpool_limits(limits=1):
+        log_density = model.score_samples(trajectory_features(achieved))
+    return np.nan_to_num(-log_density, nan=np.inf)
 
 
 def rank_priorities(rarity: np.ndarray, temperature: float) -> np.ndarray:
