@@ -113,8 +113,8 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
     scored = in_plane[in_plane["state"].isin(["complete", "pruned"])]
     finite = scored["value"][np.isfinite(scored["value"])]
     norm = Normalize(finite.min(), finite.max()) if not finite.empty else Normalize(0.0, 1.0)
-    if norm.vmin == norm.vmax:
-        norm = Normalize(norm.vmin - 0.5, norm.vmax + 0.5)
+    if norm.vmin == norm.vmax:  # one value (e.g. no success yet): a [0, 1] scale still reads right
+        norm = Normalize(min(norm.vmin, 0.0), max(norm.vmax, 1.0))
     cmap = colormaps["viridis"]
     complete = in_plane[in_plane["state"] == "complete"]
     pruned = in_plane[in_plane["state"] == "pruned"]
@@ -130,8 +130,8 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
                    linewidths=1.2, zorder=4)
     fig.colorbar(dots, ax=ax, label=value_label)
 
-    handles = [Patch(facecolor="tab:green", alpha=0.18, label=f"{MU_EPS_BAND[0]} <= mu_eps <= {MU_EPS_BAND[1]} (eq. 11)"),
-               Line2D([], [], color="0.45", lw=0.8, label="mu_eps iso-lines (eq. 11)"),
+    handles = [Patch(facecolor="tab:green", alpha=0.18, label=rf"${MU_EPS_BAND[0]} \leq \mu_\epsilon \leq {MU_EPS_BAND[1]}$ (eq. 11)"),
+               Line2D([], [], color="0.45", lw=0.8, label=r"$\mu_\epsilon$ iso-lines (eq. 11)"),
                Line2D([], [], ls="", marker="o", color="0.5", mec="black", label=f"complete ({len(complete)})"),
                Line2D([], [], ls="", marker="o", mfc="none", mec="0.5", mew=1.6,
                       label=f"pruned ({len(pruned)}; colour: last report)"),
@@ -140,8 +140,8 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, fontsize=8, frameon=False)
     ax.set_xlim(-0.02, 1.02)
     ax.set_ylim(*beta2_range)
-    ax.set_xlabel("beta1 (eq. 9: final drop of the relabel rate)")
-    ax.set_ylabel("beta2 (eq. 9: shape; 0 = linear)")
+    ax.set_xlabel(r"$\beta_1$ (eq. 9: final drop of the relabel rate)")
+    ax.set_ylabel(r"$\beta_2$ (eq. 9: shape; 0 = linear)")
     others = len(frame) - len(in_plane)
     ax.set_title(title + (f"\n({others} trial(s) without beta1/beta2 not shown)" if others else ""), fontsize=10)
     return fig
