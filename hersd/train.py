@@ -323,7 +323,8 @@ USAGE = """usage: hersd-train [KEY=VALUE ...]
 Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same
 command resumes an interrupted run from its last checkpoint.
 
-  task=reach|push|pick_and_place|slide     algo=her|archer     schedule=constant|linear|exponential
+  task=reach|push|pick_and_place|slide     schedule=constant|linear|exponential
+  algo=her|archer|her_mep|archer_mep      (*_mep: MEP prioritisation, see docs/MEP.md)
   schedule.beta1=0.25 schedule.beta2=0.5   seed=0   epochs=200   results_dir=results   quiet=true
   ddpg.<field>=...  (see hersd/config.py; defaults are the paper's appendix settings)
 """
