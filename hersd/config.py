@@ -99,6 +99,9 @@ class ScheduleConfig:
     eps: float = 0.8  # the fixed relabel rate of kind=constant (HER: 0.8, i.e. replay_k = 4)
     beta1: float = 0.0  # eq. 9: final drop of the rate, in [0, 1]
     beta2: float = 0.0  # eq. 9: shape, any real; 0 is linear, > 0 concave, < 0 convex
+    # If set, beta1 is solved from it: the beta1 whose mean rate over the run's K epochs
+    # (eq. 10, exact) equals mean_rate. Used by the iso_mu grid and the search.
+    mean_rate: Optional[float] = None
 
     def __post_init__(self) -> None:
         _check(self.kind in SCHEDULE_KINDS,
@@ -110,6 +113,21 @@ class ScheduleConfig:
         _check(_is_finite(self.beta2), f"schedule.beta2 must be a finite real number, got {self.beta2}")
         _check(self.kind != "linear" or self.beta2 == 0.0,
                f"schedule.beta2 must be 0 for schedule=linear (got {self.beta2}); use schedule=exponential")
+        if self.mean_rate is not None:
+            _check(self.kind != "constant", "schedule.mean_rate applies to linear/exponential schedules; "
+                                            "for schedule=constant set schedule.eps")
+            _check(_is_finite(self.mean_rate) and 0.0 <= self.mean_rate <= 1.0,
+                   f"schedule.mean_rate must be a number in [0, 1], got {self.mean_rate}")
+
+    def solve_beta1(self, total_epochs: int) -> None:
+        """Set beta1 from mean_rate (eq. 10 is linear in beta1: mu = 1 - beta1 * mean_k (k/K)^exp(beta2))."""
+        if self.mean_rate is None:
+            return
+        steps = [(k / total_epochs) ** math.exp(self.beta2) for k in range(1, total_epochs + 1)]
+        beta1 = (1.0 - self.mean_rate) / (sum(steps) / total_epochs)
+        _check(beta1 <= 1.0, f"schedule.mean_rate={self.mean_rate} with beta2={self.beta2} needs beta1="
+                             f"{beta1:.3f} > 1; raise mean_rate or lower beta2")
+        self.beta1 = round(beta1, 6)
 
 
 @dataclass
@@ -167,6 +185,7 @@ class TrainConfig:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
         _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
         _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        self.schedule.solve_beta1(self.epochs)
         _check(TASK_ENV_IDS.get(self.task.name) == self.task.env_id,
                f"task.env_id={self.task.env_id!r} does not match task={self.task.name!r} "
                f"(expected {TASK_ENV_IDS.get(self.task.name)!r})")

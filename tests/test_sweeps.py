@@ -1,0 +1,130 @@
+"""hersd-sweep end to end: grids, dry runs, the smoke sweep, kill and re-run, bad input."""
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hersd.runlog import read_run
+
+SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
+TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64"]
+
+
+def sweep(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    return subprocess.run([*SWEEP, *args], capture_output=True, text=True, check=check, timeout=600)
+
+
+def listed_runs(output: str) -> list[str]:
+    return [line.split()[1] for line in output.splitlines() if line.startswith("  new ")]
+
+
+def test_beta_grid_lists_300_runs_without_running_them(tmp_path):
+    result = sweep("+grid=beta", "--dry-run", f"results_dir={tmp_path}")
+    runs = listed_runs(result.stdout)
+    assert len(runs) == len(set(runs)) == 300  # 20 beta points x 3 tasks x 5 seeds
+    assert {Path(r).parts[len(tmp_path.parts)] for r in runs} == {"push", "pick_and_place", "slide"}
+    assert not any(tmp_path.iterdir())
+
+
+def test_overrides_compose_with_a_grid(tmp_path):
+    runs = listed_runs(sweep("+grid=beta", "--dry-run", "seeds=2", "task=push", f"results_dir={tmp_path}").stdout)
+    assert len(runs) == 20 * 2 and all("/push/" in r for r in runs)
+
+
+def test_paper_grid_lists_the_papers_runs(tmp_path):
+    runs = listed_runs(sweep("+grid=paper", "--dry-run", f"results_dir={tmp_path}").stdout)
+    # (HER + 4 linear + 4 exponential) x (lambda_h 1, 0.5) x 3 tasks x 5 seeds
+    assert len(runs) == len(set(runs)) == 9 * 2 * 3 * 5
+    assert sum("/archer/constant-0.8/" in r for r in runs) == 15
+    assert sum("/her/exponential-b1_0.5-b2_0.5/" in r for r in runs) == 15
+
+
+def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
+    from hersd.schedules import mean_rate_exact
+
+    result = sweep("+grid=iso_mu", "--dry-run", "seeds=1", "task=push", f"results_dir={tmp_path}")
+    runs = listed_runs(result.stdout)
+    assert len(runs) >= 6
+    for run in runs:
+        tag = Path(run).parent.name  # exponential-b1_<beta1>-b2_<beta2>
+        beta1, beta2 = map(float, re.fullmatch(r"exponential-b1_([\d.]+)-b2_(-?[\d.]+)", tag).groups())
+        assert 0.8 <= mean_rate_exact(beta1, beta2, 200) <= 0.889
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["+grid=nope"], "Available options in 'grid'"),
+    (["task=cartpole"], "Available options in 'task'"),
+    (["+grid=smoke", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
+    (["+grid=smoke", "no_such_key=1"], "no_such_key"),
+])
+def test_bad_input_names_the_choices_and_exits_nonzero(tmp_path, args, expected):
+    result = sweep(*args, "--dry-run", f"results_dir={tmp_path}", check=False)
+    assert result.returncode != 0
+    assert expected in result.stderr + result.stdout
+
+
+def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
+    result = sweep("+grid=smoke", f"results_dir={tmp_path}")
+    logs = sorted(tmp_path.rglob("run.mcap"))
+    assert len(logs) == 4, result.stdout
+    for log_path in logs:
+        log = read_run(log_path)
+        assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3]
+        assert log.meta["command"].startswith("hersd-sweep ")
+    assert "4 done" in result.stdout and "0 failed" in result.stdout
+    stamps = [p.stat().st_mtime_ns for p in logs]
+    again = sweep("+grid=smoke", f"results_dir={tmp_path}")
+    assert "4 complete (skipped)" in again.stdout
+    assert [p.stat().st_mtime_ns for p in logs] == stamps
+
+
+def test_a_failed_run_does_not_stop_the_sweep(tmp_path):
+    # seed 1's run directory is blocked by a file, so that run (only) fails
+    ok = sweep("+grid=smoke", "schedule=constant", "--dry-run", f"results_dir={tmp_path}")
+    blocked = Path([r for r in listed_runs(ok.stdout) if "/seed1-" in r][0])
+    blocked.parent.mkdir(parents=True)
+    blocked.write_text("in the way")
+    result = sweep("+grid=smoke", "schedule=constant", f"results_dir={tmp_path}", check=False)
+    assert result.returncode != 0
+    assert "1 done" in result.stdout and "1 failed" in result.stdout
+    assert len(list(tmp_path.rglob("run.mcap"))) == 1
+
+
+def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
+    args = ["+grid=smoke", "epochs=4", *TINY, "hydra.launcher.n_jobs=1", f"results_dir={tmp_path}"]
+    proc = subprocess.Popen([*SWEEP, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    for line in proc.stdout:
+        if line.startswith("[sweep 1/"):
+            break
+    time.sleep(3)  # the second run is under way
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    first = [p for p in tmp_path.rglob("run.mcap") if read_run(p).complete]
+    assert len(first) == 1
+    finished_bytes = first[0].read_bytes()
+
+    result = sweep(*args)
+    assert "1 complete (skipped)" in result.stdout and "0 failed" in result.stdout
+    logs = list(tmp_path.rglob("run.mcap"))
+    assert len(logs) == 4
+    for log_path in logs:
+        log = read_run(log_path)
+        assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4]  # none lost, none twice
+    assert first[0].read_bytes() == finished_bytes  # the finished run was not re-run
+    progress = [json.loads(line) for p in tmp_path.glob(".sweeps/*/progress.jsonl") for line in p.read_text().splitlines()]
+    assert sorted(p["run_dir"] for p in progress).count(str(first[0].parent)) == 1
+
+
+def test_submitit_local_launcher_runs_the_same_sweep(tmp_path):
+    result = sweep("+grid=smoke", "schedule=constant", "seeds=1", "epochs=1", *TINY,
+                   "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=10", f"results_dir={tmp_path}")
+    logs = list(tmp_path.rglob("run.mcap"))
+    assert len(logs) == 1 and read_run(logs[0]).complete, result.stdout + result.stderr
