@@ -32,6 +32,8 @@ from analysis.metrics import analyse
 
 DEFAULT_WINDOW = 50
 FORMATS = ("png", "svg", "pdf")
+DPI = 100
+FAST_PNG = {"compress_level": 1}  # zlib level 1: ~15 % larger files, a tenth of the figure stage faster
 RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "epochs_done", "total_epochs", "complete", "damaged", "run_id"]
 TABLE_NOTES = {
     "summary": ("One row per task and configuration. <b>final_median</b>: median over seeds of each seed's "
@@ -93,7 +95,7 @@ def _embedded(figure: ReportFigure, fmt: str, saved: Path) -> str:
     """An <img> holding the figure: the saved SVG or PNG, or a PNG rendering when the format is PDF."""
     if fmt == "pdf":
         buffer = io.BytesIO()
-        figure.figure.savefig(buffer, format="png", dpi=100)
+        figure.figure.savefig(buffer, format="png", dpi=DPI, pil_kwargs=FAST_PNG)
         data, mime = buffer.getvalue(), "image/png"
     else:
         data, mime = saved.read_bytes(), "image/svg+xml" if fmt == "svg" else "image/png"
@@ -169,7 +171,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     embedded = []
     for figure in drawn:
         path = figures_dir / f"{figure.name}.{fmt}"
-        figure.figure.savefig(path, format=fmt, dpi=100)
+        figure.figure.savefig(path, format=fmt, dpi=DPI, **({"pil_kwargs": FAST_PNG} if fmt == "png" else {}))
         saved.append(path)
         embedded.append((figure, _embedded(figure, fmt, path)))
     timings["figures"] = time.perf_counter() - start
