@@ -150,8 +150,25 @@ class RunLogWriter:
 
 
 @dataclass
+class RunRecords:
+    """One run's messages as read back: ``records`` has one dict per completed epoch, in
+    epoch order (for an epoch written twice, by a resumed run, the last write)."""
+
+    path: Path
+    sessions: list[dict[str, Any]]
+    records: list[dict[str, Any]]
+    complete: bool
+    damaged: bool  # the file has no valid end (a killed or still-running writer); complete epochs are kept
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """The first session's metadata."""
+        return self.sessions[0]
+
+
+@dataclass
 class RunLog:
-    """One run's log as read back.
+    """One run's log as read back, epochs as a DataFrame.
 
     ``epochs`` has one row per completed epoch (columns: :data:`EPOCH_FIELDS`), sorted by
     epoch; ``meta`` is the first session's metadata; ``sessions`` lists every session's.
@@ -169,20 +186,19 @@ class RunLogError(ValueError):
     """The file is not a readable hersd run log."""
 
 
-def read_run(path: str | Path) -> RunLog:
-    """Read a run log; a truncated file yields every epoch written before the damage."""
+def read_records(path: str | Path) -> RunRecords:
+    """Read a run log's messages; a truncated file yields every epoch written before the damage."""
     path = Path(path)
     sessions: list[dict[str, Any]] = []
-    records: list[dict[str, Any]] = []
-    complete = False
-    damaged = False
+    by_epoch: dict[int, dict[str, Any]] = {}
+    complete = damaged = False
     try:
         with open(path, "rb") as stream:
             try:
                 for _schema_record, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
                     payload = json.loads(message.data)
                     if channel.topic == "/epoch":
-                        records.append(payload)
+                        by_epoch[payload["epoch"]] = payload
                     elif channel.topic == "/run/meta":
                         sessions.append(payload)
                     elif channel.topic == "/run/status":
@@ -193,8 +209,15 @@ def read_run(path: str | Path) -> RunLog:
         raise RunLogError(f"{path}: cannot open ({err.strerror})") from None
     if not sessions:
         raise RunLogError(f"{path}: not a hersd run log (no run metadata found)")
-    epochs = pd.DataFrame.from_records(records, columns=list(EPOCH_FIELDS))
-    epochs = epochs.drop_duplicates("epoch", keep="last").sort_values("epoch").reset_index(drop=True)
+    return RunRecords(path=path, sessions=sessions, records=[by_epoch[k] for k in sorted(by_epoch)],
+                      complete=complete, damaged=damaged)
+
+
+def read_run(path: str | Path) -> RunLog:
+    """Read a run log into a DataFrame of its epochs (see :func:`read_records`)."""
+    raw = read_records(path)
+    epochs = pd.DataFrame.from_records(raw.records, columns=list(EPOCH_FIELDS))
     epochs = epochs.astype({name: "float64" for name, (kind, _) in EPOCH_FIELDS.items() if kind == "number"})
     epochs = epochs.astype({name: "int64" for name, (kind, _) in EPOCH_FIELDS.items() if kind == "integer"})
-    return RunLog(path=path, meta=sessions[0], epochs=epochs, complete=complete, sessions=sessions, damaged=damaged)
+    return RunLog(path=raw.path, meta=raw.meta, epochs=epochs, complete=raw.complete, sessions=raw.sessions,
+                  damaged=raw.damaged)

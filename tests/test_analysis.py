@@ -13,11 +13,11 @@ import pytest
 
 from analysis import metrics
 from analysis.figures import mep_figures, q_figures
-from analysis.load import config_label, load_runs, read_log
+from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
 from hersd.config import TASK_ENV_IDS, AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
-from hersd.runlog import RunLogWriter, read_run
+from hersd.runlog import RunLogWriter, read_records, read_run
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
 WINDOW = 3
@@ -216,8 +216,8 @@ def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, ca
     assert err == ["warning: skipped unreadable log garbage/run.mcap: not a hersd run log (no run metadata found)"]
 
 
-def test_fast_reader_agrees_with_read_run(tmp_path):
-    """read_log re-reads the contract without per-file DataFrames; it must agree with read_run."""
+def test_record_reader_agrees_with_read_run(tmp_path):
+    """read_records (used by the loader, no per-file DataFrame) must agree with read_run."""
     config = make_config(epochs=6)
     complete = write_run(tmp_path / "complete", config, np.linspace(0, 1, 6))
     truncated = write_run(tmp_path / "truncated", config, np.linspace(0, 1, 6))
@@ -229,11 +229,11 @@ def test_fast_reader_agrees_with_read_run(tmp_path):
         writer.write_epoch(record)
     writer.finish(6)
     for path in (complete, truncated, resumed):
-        expected, got = read_run(path), read_log(path)
+        expected, got = read_run(path), read_records(path)
         assert (got.meta, got.complete, got.damaged) == (expected.meta, expected.complete, expected.damaged)
         pd.testing.assert_frame_equal(pd.DataFrame.from_records(got.records, columns=expected.epochs.columns)
                                       .astype(expected.epochs.dtypes), expected.epochs)
-    assert read_log(resumed).records[3]["test_success"] == pytest.approx(0.64)  # the rewrite, not 0.5
+    assert read_records(resumed).records[3]["test_success"] == pytest.approx(0.64)  # the rewrite, not 0.5
 
 
 # --- the command ------------------------------------------------------------------------------------------------
