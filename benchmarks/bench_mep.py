@@ -10,7 +10,12 @@ process, alternating (off, on, on, off, ...) so drift in the shared machine's lo
    gets a density model fit on all but the last 100 of them, as the previous epoch's fit
    would have been (that first, cold fit is not timed: a run pays it once);
 3. each variant resumes that checkpoint for epoch 2 with 50 cycles; its log gives
-   ``epoch_seconds`` and ``mep_fit_seconds``.
+   ``epoch_seconds`` (wall clock) and ``mep_fit_seconds``; the process CPU time of the
+   resumed run is measured too, since on a shared machine other jobs inflate wall-clock
+   times at random (the CPU time includes the resume's start-up, the same for both).
+
+Printed: each epoch, then the ratios with/without MEP of the mean CPU seconds and of the
+fastest (least disturbed) wall-clock epoch.
 
 Usage: python benchmarks/bench_mep.py [--prefill 2000] [--repeats 2]
 """
@@ -88,11 +93,14 @@ def prefilled_start(directory: Path, prefill: Episodes, mep: bool) -> None:
 
 
 def timed_epoch(start: Path, work: Path, mep: bool) -> dict:
-    """Resume a copy of ``start`` for one full epoch; its log record."""
+    """Resume a copy of ``start`` for one full epoch; its log record plus ``cpu_seconds``."""
     shutil.rmtree(work, ignore_errors=True)
     shutil.copytree(start, work)
     algo = "algo=her_mep" if mep else "algo=her"
-    return read_run(train(compose([*BASE, algo, f"run_dir={work}"]))).epochs.iloc[-1].to_dict()
+    tic = time.process_time()
+    log_path = train(compose([*BASE, algo, f"run_dir={work}"]))
+    cpu_seconds = time.process_time() - tic
+    return {**read_run(log_path).epochs.iloc[-1].to_dict(), "cpu_seconds": cpu_seconds}
 
 
 def main() -> None:
@@ -115,13 +123,15 @@ def main() -> None:
             record = timed_epoch(starts[mep], root / "work", mep)
             records[mep].append(record)
             fit = f"  fit {record['mep_fit_seconds']:.2f} s  entropy {record['priority_entropy']:.3f} nats" if mep else ""
-            print(f"{'MEP' if mep else 'HER'} epoch {record['epoch_seconds']:6.1f} s  "
-                  f"({record['episodes_stored']} episodes stored){fit}")
-    without = np.mean([r["epoch_seconds"] for r in records[False]])
-    with_mep = np.mean([r["epoch_seconds"] for r in records[True]])
+            print(f"{'MEP' if mep else 'HER'} epoch {record['epoch_seconds']:6.1f} s wall, "
+                  f"{record['cpu_seconds']:6.1f} s CPU  ({record['episodes_stored']:.0f} episodes stored){fit}")
+    cpu = {mep: np.mean([r["cpu_seconds"] for r in records[mep]]) for mep in records}
+    wall = {mep: min(r["epoch_seconds"] for r in records[mep]) for mep in records}
     fit = np.mean([r["mep_fit_seconds"] for r in records[True]])
-    print(f"mean epoch seconds: without MEP {without:.1f}, with MEP {with_mep:.1f} (of which fit {fit:.2f})")
-    print(f"ratio with/without MEP: {with_mep / without:.3f}")
+    print(f"mean CPU seconds per epoch: without MEP {cpu[False]:.1f}, with MEP {cpu[True]:.1f} "
+          f"(mean fit {fit:.2f} s)")
+    print(f"fastest wall-clock epoch:   without MEP {wall[False]:.1f}, with MEP {wall[True]:.1f}")
+    print(f"ratio with/without MEP: CPU {cpu[True] / cpu[False]:.3f}, wall clock {wall[True] / wall[False]:.3f}")
 
 
 if __name__ == "__main__":
