@@ -130,7 +130,8 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
                    linewidths=1.2, zorder=4)
     fig.colorbar(dots, ax=ax, label=value_label)
 
-    handles = [Patch(facecolor="tab:green", alpha=0.18, label=rf"${MU_EPS_BAND[0]} \leq \mu_\epsilon \leq {MU_EPS_BAND[1]}$ (eq. 11)"),
+    band_label = rf"${MU_EPS_BAND[0]} \leq \mu_\epsilon \leq {MU_EPS_BAND[1]}$ (eq. 11)"
+    handles = [Patch(facecolor="tab:green", alpha=0.18, label=band_label),
                Line2D([], [], color="0.45", lw=0.8, label=r"$\mu_\epsilon$ iso-lines (eq. 11)"),
                Line2D([], [], ls="", marker="o", color="0.5", mec="black", label=f"complete ({len(complete)})"),
                Line2D([], [], ls="", marker="o", mfc="none", mec="0.5", mew=1.6,
@@ -164,7 +165,10 @@ def markdown_table(frame: pd.DataFrame) -> str:
 def _open_existing_storage(storage_url_or_db_path: str | Path) -> optuna.storages.BaseStorage:
     spec = str(storage_url_or_db_path)
     kind, location = storage_location(spec)
-    path = location if kind == "journal" else location[len("sqlite:///"):] if location.startswith("sqlite:///") else None
+    if kind == "journal":
+        path = location
+    else:
+        path = location[len("sqlite:///"):] if location.startswith("sqlite:///") else None
     if path is not None and not Path(path).exists():
         raise FileNotFoundError(f"{path}: no such study storage")
     return open_storage(spec)

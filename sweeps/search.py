@@ -23,6 +23,7 @@ their runs resume from checkpoints, the repeated trial continues where the lost 
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import multiprocessing
@@ -160,7 +161,8 @@ def validate(search: SearchConfig) -> None:
            f"search.launcher={search.launcher!r} is unknown; choose one of: {', '.join(LAUNCHERS)}")
     _check(search.stale_after_minutes > 0, f"search.stale_after_minutes must be > 0, got {search.stale_after_minutes}")
     pruner = search.pruner
-    _check(pruner.kind in PRUNERS, f"search.pruner.kind={pruner.kind!r} is unknown; choose one of: {', '.join(PRUNERS)}")
+    _check(pruner.kind in PRUNERS,
+           f"search.pruner.kind={pruner.kind!r} is unknown; choose one of: {', '.join(PRUNERS)}")
     _check(pruner.n_startup_trials >= 0 and pruner.n_warmup_steps >= 0,
            "search.pruner.n_startup_trials and n_warmup_steps must be >= 0")
     _check(pruner.min_resource >= 1 and pruner.reduction_factor >= 2,
@@ -174,25 +176,43 @@ def validate(search: SearchConfig) -> None:
         storage_location(search.storage)
 
 
+def register_schema() -> None:
+    """Register :class:`SearchConfig` as ``search/search_schema``, which every ``conf/search`` file
+    lists first in its defaults: files then hold only their differences, and unknown keys or
+    wrong types fail at composition."""
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(group="search", name="search_schema", node=SearchConfig)
+
+
 def compose_search(overrides: list[str]) -> SearchConfig:
     """``conf/search/<name>.yaml`` + ``search.*`` overrides -> validated :class:`SearchConfig`.
 
     ``overrides`` are Hydra overrides with the group selected as ``+search=<name>``.
     """
     from hydra import compose, initialize_config_dir
-    from omegaconf.errors import ConfigKeyError, ValidationError
+    from hydra.errors import HydraException, MissingConfigException
+    from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
 
-    from hersd.train import CONF_DIR
+    from hersd.train import CONF_DIR, explain_config_error
 
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3", job_name="hersd-search"):
-        composed = compose(config_name=None, overrides=overrides)
+    register_schema()
     try:
-        merged = OmegaConf.merge(OmegaConf.structured(SearchConfig), composed.search)
-        search = OmegaConf.to_object(merged)
-    except ConfigKeyError as err:
-        raise ConfigError(f"search.{err.full_key} is not a search setting; see conf/search/default.yaml") from None
-    except ValidationError as err:
-        raise ConfigError(f"search.{err.full_key}: {str(err).splitlines()[0]}") from None
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3", job_name="hersd-search"):
+            composed = compose(config_name=None, overrides=overrides)
+    except MissingConfigException as err:
+        choices = sorted(path.stem for path in (CONF_DIR / "search").glob("*.yaml"))
+        name = (err.missing_cfg_file or "").partition("/")[2] or "?"
+        raise ConfigError(f"search={name} is not a known search; choose one of: {', '.join(choices)}") from None
+    except HydraException as err:
+        cause = err.__cause__ if err.__cause__ is not None else err
+        key = getattr(cause, "full_key", None)
+        if isinstance(cause, (ConfigAttributeError, ConfigKeyError)) and key:
+            raise ConfigError(f"{key} is not a search setting; see conf/search/default.yaml") from None
+        if isinstance(cause, ValidationError) and key:
+            raise ConfigError(f"{key}: {str(cause).splitlines()[0]}") from None
+        raise ConfigError(explain_config_error(err)) from None
+    search = OmegaConf.to_object(composed.search)
     validate(search)
     return search
 
@@ -216,6 +236,27 @@ def storage_location(spec: str) -> tuple[str, str]:
     return "rdb", f"sqlite:///{path}"
 
 
+class SQLiteStorage(RDBStorage):
+    """RDBStorage on a local SQLite file, with queue claims serialised by a file lock.
+
+    Optuna pops an enqueued trial by reading it as WAITING and then setting it RUNNING; SQLite
+    (through Python's sqlite3) reads outside the write transaction, so two workers popping at
+    the same moment can both claim one trial, and both train it. Holding ``<db>.lock`` around
+    the WAITING -> RUNNING step makes the second claimant see RUNNING and move on.
+    """
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(f"sqlite:///{path}", engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
+        self.claim_lock_path = path.with_name(path.name + ".lock")
+
+    def set_trial_state_values(self, trial_id: int, state: TrialState, values=None) -> bool:
+        if state != TrialState.RUNNING:
+            return super().set_trial_state_values(trial_id, state, values)
+        with open(self.claim_lock_path, "a") as lock_file:
+            fcntl.flock(lock_file, fcntl.LOCK_EX)
+            return super().set_trial_state_values(trial_id, state, values)
+
+
 def open_storage(spec: str) -> BaseStorage:
     """Open (creating if needed) the study storage named by ``spec`` (see :func:`storage_location`)."""
     kind, location = storage_location(spec)
@@ -223,8 +264,9 @@ def open_storage(spec: str) -> BaseStorage:
         Path(location).parent.mkdir(parents=True, exist_ok=True)
         return JournalStorage(JournalFileBackend(location))
     if location.startswith("sqlite:///"):
-        Path(location[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
-        return RDBStorage(location, engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
+        path = Path(location[len("sqlite:///"):])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return SQLiteStorage(path)
     return RDBStorage(location, engine_kwargs={"pool_pre_ping": True})
 
 
@@ -321,13 +363,20 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
 
 
 def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` of this host runs (a zombie, killed but not reaped, does not)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    stat = Path(f"/proc/{pid}/stat")
+    if not Path("/proc/self/stat").exists():  # no procfs (macOS): trust the signal check
+        return True
+    try:
+        return stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
 
 
 def _stale_reason(trial: optuna.trial.FrozenTrial, now: float, stale_after_seconds: float) -> str | None:
