@@ -32,7 +32,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
 from hersd.schedules import mean_rate_approx  # noqa: E402
-from sweeps.search import mean_rates, open_storage, storage_location  # noqa: E402
+from sweeps.search import mean_rates, open_storage  # noqa: E402
 
 MU_EPS_BAND = (0.8, 0.889)  # the HER paper's two best fixed rates; the seed paper's target for mu_eps
 ISO_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.889, 0.95)
@@ -81,7 +81,9 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
 def best_trials(frame: pd.DataFrame, top: int = 10) -> pd.DataFrame:
     """The ``top`` complete trials by value, best first, with a rank column; empty columns dropped."""
     best = frame[frame["state"] == "complete"].sort_values(["value", "trial"], ascending=[False, True]).head(top)
-    best = best.drop(columns=["state", "last_step"]).dropna(axis=1, how="all")
+    best = best.drop(columns=["state", "last_step"])
+    if not best.empty:
+        best = best.dropna(axis=1, how="all")
     best.insert(0, "rank", range(1, len(best) + 1))
     return best.reset_index(drop=True)
 
@@ -162,18 +164,6 @@ def markdown_table(frame: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _open_existing_storage(storage_url_or_db_path: str | Path) -> optuna.storages.BaseStorage:
-    spec = str(storage_url_or_db_path)
-    kind, location = storage_location(spec)
-    if kind == "journal":
-        path = location
-    else:
-        path = location[len("sqlite:///"):] if location.startswith("sqlite:///") else None
-    if path is not None and not Path(path).exists():
-        raise FileNotFoundError(f"{path}: no such study storage")
-    return open_storage(spec)
-
-
 def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study_name: str | None = None,
                   top: int = 10) -> list[Path]:
     """Draw the beta-plane figure and the best-trials tables of each study in the storage
@@ -182,7 +172,7 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a SQLAlchemy
     URL, or ``journal:<path>``.
     """
-    storage = _open_existing_storage(storage_url_or_db_path)
+    storage = open_storage(str(storage_url_or_db_path), create=False)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     names = [study_name] if study_name is not None else sorted(optuna.get_all_study_names(storage))
@@ -202,6 +192,7 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
         md_path = out_dir / f"{name}_best_trials.md"
         md_path.write_text(f"# Best trials of study `{name}`\n\n{value_label}; mu_eps exact over the study's "
                            f"epochs (eq. 10) and by eq. 11.\n\n"
-                           + markdown_table(best.drop(columns=["run_dirs"], errors="ignore")))
+                           + markdown_table(best.drop(columns=["run_dirs"], errors="ignore"))
+                           + ("" if len(best) else "\n(no complete trials yet)\n"))
         written += [figure_path, csv_path, md_path]
     return written

@@ -172,6 +172,8 @@ def validate(search: SearchConfig) -> None:
     for params in search.enqueue:
         unknown = sorted(set(params) - set(PARAM_NAMES))
         _check(not unknown, f"search.enqueue: unknown parameter(s) {unknown}; use {', '.join(PARAM_NAMES)}")
+        _check(params.get("kind", space.kinds[0]) in space.kinds,
+               f"search.enqueue: kind={params.get('kind')!r} is not among search.space.kinds {list(space.kinds)}")
     if search.storage is not None:
         storage_location(search.storage)
 
@@ -257,15 +259,21 @@ class SQLiteStorage(RDBStorage):
             return super().set_trial_state_values(trial_id, state, values)
 
 
-def open_storage(spec: str) -> BaseStorage:
-    """Open (creating if needed) the study storage named by ``spec`` (see :func:`storage_location`)."""
+def open_storage(spec: str, create: bool = True) -> BaseStorage:
+    """Open the study storage named by ``spec`` (see :func:`storage_location`).
+
+    ``create=False`` raises FileNotFoundError instead of creating a missing SQLite or journal file.
+    """
     kind, location = storage_location(spec)
-    if kind == "journal":
-        Path(location).parent.mkdir(parents=True, exist_ok=True)
-        return JournalStorage(JournalFileBackend(location))
-    if location.startswith("sqlite:///"):
-        path = Path(location[len("sqlite:///"):])
+    sqlite = location.startswith("sqlite:///")
+    path = Path(location) if kind == "journal" else Path(location[len("sqlite:///"):]) if sqlite else None
+    if path is not None:
+        if not create and not path.exists():
+            raise FileNotFoundError(f"{path}: no such study storage")
         path.parent.mkdir(parents=True, exist_ok=True)
+    if kind == "journal":
+        return JournalStorage(JournalFileBackend(str(path)))
+    if sqlite:
         return SQLiteStorage(path)
     return RDBStorage(location, engine_kwargs={"pool_pre_ping": True})
 
@@ -302,6 +310,10 @@ def make_plan(search: SearchConfig, train_overrides: list[str]) -> SearchPlan:
         key = override.split("=", 1)[0].lstrip("+~")
         _check(key not in taken, f"{override}: {key} is chosen by the search (search.space, search.seeds); remove it")
     base = compose_train(train_overrides)
+    steps = search.seeds * base.epochs
+    _check(search.pruner.kind != "hyperband" or search.pruner.min_resource <= steps,
+           f"search.pruner.min_resource ({search.pruner.min_resource}) exceeds the steps of a trial "
+           f"(seeds x epochs = {steps})")
     neutral = replace(base, seed=0, schedule=ScheduleConfig())
     if search.space.lambda_h is not None:
         neutral = replace(neutral, algo=replace(neutral.algo, lambda_h=1.0))
@@ -370,11 +382,10 @@ def _pid_alive(pid: int) -> bool:
         return False
     except PermissionError:
         return True
-    stat = Path(f"/proc/{pid}/stat")
     if not Path("/proc/self/stat").exists():  # no procfs (macOS): trust the signal check
         return True
     try:
-        return stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except (OSError, IndexError):
         return False
 
@@ -497,12 +508,16 @@ class TrialProgress:
             self.trial.set_user_attr("pruned_reason", f"pruner at step {max(self.reported)}")
             raise optuna.TrialPruned(f"pruned at step {max(self.reported)}")
 
-    def finish_seed(self, values: np.ndarray) -> float:
+    def finish_seed(self, values: np.ndarray) -> None:
+        """Record a finished run's objective (a non-finite one prunes the trial)."""
         value = seed_objective(values, self.objective)
         if not np.isfinite(value):
             self.trial.set_user_attr("pruned_reason", "non-finite objective")
             raise optuna.TrialPruned("non-finite objective")
         self.seed_values.append(value)
+
+    def value(self) -> float:
+        """The trial's objective: the mean over the finished seeds."""
         return float(np.mean(self.seed_values))
 
 
@@ -531,7 +546,6 @@ def objective(trial: optuna.Trial, plan: SearchPlan) -> float:
     progress = TrialProgress(trial, search.objective, plan.epochs)
     quiet = [] if any(o.split("=", 1)[0] == "quiet" for o in plan.train_overrides) else ["quiet=true"]
     run_dirs: list[str] = []
-    value = float("nan")
     try:
         for seed_index in range(search.seeds):
             overrides = [*plan.train_overrides, *param_overrides(params), f"seed={search.first_seed + seed_index}",
@@ -553,11 +567,11 @@ def objective(trial: optuna.Trial, plan: SearchPlan) -> float:
                 raise RuntimeError(f"{log_path} holds {len(values)} of {plan.epochs} epochs after training")
             last_seed = seed_index == search.seeds - 1
             progress.update(seed_index, values, may_prune=not last_seed)
-            value = progress.finish_seed(values)
+            progress.finish_seed(values)
     except KeyboardInterrupt:
         trial.set_user_attr("interrupted", True)
         raise
-    return value
+    return progress.value()
 
 
 # --------------------------------------------------------------------------- workers
@@ -578,8 +592,13 @@ def run_worker(plan: SearchPlan, worker_index: int, n_trials: int, trials_before
                               sampler=make_sampler(plan.search.sampler, worker_index, trials_before),
                               pruner=make_pruner(plan))
     stop_when_done = optuna.study.MaxTrialsCallback(plan.search.n_trials, states=FINISHED_STATES)
-    study.optimize(partial(objective, plan=plan), n_trials=n_trials, catch=(Exception,),
-                   callbacks=[stop_when_done])
+    try:
+        study.optimize(partial(objective, plan=plan), n_trials=n_trials, catch=(Exception,),
+                       callbacks=[stop_when_done])
+    except KeyboardInterrupt:
+        if parent_pid is None:  # in the search's own process: let main() report it
+            raise
+        sys.exit(130)  # a worker process: the trial is recorded as interrupted; no traceback
 
 
 def split_trials(n_trials: int, n_workers: int) -> list[int]:
@@ -627,7 +646,10 @@ def submit_slurm(plan: SearchPlan, shares: list[int], trials_before: int) -> lis
     import submitit
 
     settings = slurm_settings(plan.search.slurm)
-    executor = submitit.AutoExecutor(folder=Path(plan.report_dir) / "slurm" / "%j", cluster="slurm")
+    try:
+        executor = submitit.AutoExecutor(folder=Path(plan.report_dir) / "slurm" / "%j", cluster="slurm")
+    except RuntimeError as err:  # no SLURM here
+        raise ConfigError(f"search.launcher=slurm: {err}") from None
     executor.update_parameters(name=f"hersd-search-{plan.study_name}", timeout_min=settings["timeout_min"],
                                cpus_per_task=settings["cpus_per_task"], mem_gb=settings["mem_gb"],
                                **({"slurm_partition": settings["partition"]} if settings["partition"] else {}))
@@ -694,8 +716,12 @@ def main(argv: list[str] | None = None) -> None:
     try:
         search_overrides, train_overrides = split_overrides([arg for arg in argv if arg != "--report"])
         plan = make_plan(compose_search(search_overrides), train_overrides)
-        storage = open_storage(plan.storage)
+        storage = open_storage(plan.storage, create=not report_only)
+        _check(not report_only or plan.study_name in optuna.get_all_study_names(storage),
+               f"no study {plan.study_name!r} in {plan.storage}; run the search first (same command without --report)")
         study = open_study(plan, storage)
+    except FileNotFoundError as err:
+        _fail(f"{err}; run the search first (same command without --report)")
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
@@ -717,7 +743,10 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{finished} of {plan.search.n_trials} trials finished; running {remaining} on "
                   f"{len(shares)} {plan.search.launcher} worker(s)", flush=True)
             if plan.search.launcher == "slurm":
-                job_ids = submit_slurm(plan, shares, trials_before)
+                try:
+                    job_ids = submit_slurm(plan, shares, trials_before)
+                except ConfigError as err:
+                    _fail(str(err))
                 print(f"submitted SLURM jobs {', '.join(job_ids)}; logs in {plan.report_dir}/slurm. When they end, "
                       f"re-run this command with --report (or without, to resume a cut-short search)")
                 return
