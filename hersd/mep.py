@@ -13,13 +13,15 @@ What differs from the original code, and why (the quantities computed are the sa
   (which the MEP paper reports slows training more than tenfold);
 - rarities live in a per-slot array in buffer order: new episodes are scored when stored,
   and every stored episode is re-scored once per epoch after the fit, in one call;
-- ranks run 1..n (the rarest episode has rank n), not 0..n-1, so the most common
+- ranks run from 1 (the most common trajectory), not from 0, so the most common
   trajectory keeps a small non-zero probability instead of never being replayed.
 
-The functions are pure; :class:`EpisodePrioritizer` holds the fitted model and the rarity
-array for the training loop and its checkpoint. Fitting and scoring use one BLAS thread, as
+The functions take everything they use as arguments (``fit_density`` updates the model it
+is given); :class:`EpisodePrioritizer` holds the fitted model and the rarity array for the
+training loop and its checkpoint. Fitting and scoring use one BLAS thread, as
 the rest of a run uses one torch thread: runs of a sweep share the cores, and an
-oversubscribed multi-threaded BLAS made a fit ten times slower on a loaded 2-core machine.
+oversubscribed multi-threaded BLAS made a fit fifty times slower on a loaded 2-core
+machine (docs/MEP.md).
 """
 
 from __future__ import annotations
