@@ -182,7 +182,21 @@ def test_ci_search_on_two_workers_with_a_journal(tmp_path: Path, capsys) -> None
     names = sorted(p.name for p in report.iterdir())
     assert names == sorted(f"{study.study_name}_{suffix}" for suffix in
                            ("beta_plane.png", "best_trials.csv", "best_trials.md"))
-    assert "trials: " in capsys.readouterr().out
+    counts = [len(study.get_trials(states=(state,))) for state in FINISHED]
+    assert f"trials: {counts[0]} complete, {counts[1]} pruned, 0 fail" in capsys.readouterr().out
+
+    for path in report.iterdir():
+        path.unlink()
+    search.main(["--report", "search=ci", f"search.storage=journal:{journal}", *tiny_search(tmp_path)])
+    assert sorted(p.name for p in report.iterdir()) == names  # redrawn, nothing trained
+    assert len(load(f"journal:{journal}").trials) == 6
+
+
+def test_report_of_a_missing_study_fails_at_start(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        search.main(["--report", *tiny_search(tmp_path)])
+    assert exit_info.value.code == 2 and "run the search first" in capsys.readouterr().err
+    assert not list((tmp_path / "search").glob("*.db"))
 
 
 def _finished_trials(storage: str) -> dict[int, tuple]:
