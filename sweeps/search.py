@@ -108,7 +108,7 @@ class SlurmConfig:
 
 @dataclass
 class SearchConfig:
-    study_name: Optional[str] = None  # null: <task>-<algo>-<hash of what the objective depends on>
+    study_name: Optional[str] = None  # null: <task>-<algo>-<search file>-<hash of what the objective depends on>
     storage: Optional[str] = None  # null: sqlite under <results_dir>/search; or a SQLAlchemy URL, or journal:<path>
     n_trials: int = 50  # complete + pruned trials the study should hold
     n_jobs: int = 1  # worker processes (local) or SLURM jobs sharing the study
@@ -301,8 +301,12 @@ def searched_keys(search: SearchConfig) -> tuple[str, ...]:
     return keys + (("algo.lambda_h",) if search.space.lambda_h is not None else ())
 
 
-def make_plan(search: SearchConfig, train_overrides: list[str]) -> SearchPlan:
-    """Compose the base training config, derive the study's name, storage and settings."""
+def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str = "default") -> SearchPlan:
+    """Compose the base training config, derive the study's name, storage and settings.
+
+    ``search_name`` (the ``conf/search`` file) is part of the default study name, so another
+    search file starts another study while narrowed or widened ranges continue the same one.
+    """
     from hersd.train import compose as compose_train
 
     taken = searched_keys(search)
@@ -321,7 +325,7 @@ def make_plan(search: SearchConfig, train_overrides: list[str]) -> SearchPlan:
                 "first_seed": search.first_seed, "epochs": base.epochs, "task": base.task.name,
                 "algo": base.algo.name, "train_config": config_hash(neutral)}
     digest = hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:8]
-    study_name = search.study_name or f"{base.task.name}-{base.algo.name}-{digest}"
+    study_name = search.study_name or f"{base.task.name}-{base.algo.name}-{search_name}-{digest}"
     search_dir = Path(base.results_dir).resolve() / "search"
     storage = search.storage or f"sqlite:///{search_dir / f'{study_name}.db'}"
     return SearchPlan(search=search, study_name=study_name, storage=storage,
@@ -674,8 +678,8 @@ other override goes to the training config as for hersd-train (task=reach epochs
 """
 
 
-def split_overrides(argv: list[str]) -> tuple[list[str], list[str]]:
-    """Command-line overrides -> (search overrides with the group as ``+search=``, training overrides)."""
+def split_overrides(argv: list[str]) -> tuple[str, list[str], list[str]]:
+    """Command-line overrides -> (search file name, ``search.*`` overrides, training overrides)."""
     search_overrides, train_overrides = [], []
     group = "default"
     for arg in argv:
@@ -688,7 +692,7 @@ def split_overrides(argv: list[str]) -> tuple[list[str], list[str]]:
             raise ConfigError(f"unknown option {arg}; see hersd-search --help")
         else:
             train_overrides.append(arg)
-    return [f"+search={group}", *search_overrides], train_overrides
+    return group, search_overrides, train_overrides
 
 
 def write_report(plan: SearchPlan) -> list[Path]:
@@ -714,8 +718,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     report_only = "--report" in argv
     try:
-        search_overrides, train_overrides = split_overrides([arg for arg in argv if arg != "--report"])
-        plan = make_plan(compose_search(search_overrides), train_overrides)
+        search_name, search_overrides, train_overrides = split_overrides([a for a in argv if a != "--report"])
+        plan = make_plan(compose_search([f"+search={search_name}", *search_overrides]), train_overrides, search_name)
         storage = open_storage(plan.storage, create=not report_only)
         _check(not report_only or plan.study_name in optuna.get_all_study_names(storage),
                f"no study {plan.study_name!r} in {plan.storage}; run the search first (same command without --report)")
