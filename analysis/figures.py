@@ -19,6 +19,7 @@ from matplotlib import colormaps  # noqa: E402
 from matplotlib.cm import ScalarMappable  # noqa: E402
 from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
 from analysis.load import task_rank  # noqa: E402
@@ -138,8 +139,10 @@ def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None
 
 
 def _label_outer(axes, ylabel: str, xlabel: str = "epoch") -> None:
-    """x label under the bottom panel of each column, y label left of each row."""
+    """x label under the bottom panel of each column, y label left of each row; epochs get whole-number ticks."""
     for axis in axes:
+        if xlabel.startswith("epoch"):
+            axis.xaxis.set_major_locator(MaxNLocator(integer=True))
         spec = axis.get_subplotspec()
         if spec.is_first_col():
             axis.set_ylabel(ylabel)

@@ -75,7 +75,7 @@ def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
     assert len(logs) == 4, result.stdout
     for log_path in logs:
         log = read_run(log_path)
-        assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3]
+        assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4]
         assert log.meta["command"].startswith("hersd-sweep ")
     assert "4 done" in result.stdout and "0 failed" in result.stdout
     stamps = [p.stat().st_mtime_ns for p in logs]
