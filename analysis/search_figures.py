@@ -104,7 +104,9 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
     """The trials over the eq. 11 iso-lines of mu_eps, the band shaded, coloured by value."""
     fig = Figure(figsize=(7.0, 5.0), layout="constrained")
     ax = fig.add_subplot()
-    beta1_grid, beta2_grid = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(*beta2_range, 201))
+    margin = 0.03 * (beta2_range[1] - beta2_range[0] or 1.0)  # keep markers on the bounds visible
+    beta2_limits = (beta2_range[0] - margin, beta2_range[1] + margin)
+    beta1_grid, beta2_grid = np.meshgrid(np.linspace(0.0, 1.0, 201), np.linspace(*beta2_limits, 201))
     mu = mean_rate_approx(beta1_grid, beta2_grid)
     ax.contourf(beta1_grid, beta2_grid, mu, levels=list(MU_EPS_BAND), colors=["tab:green"], alpha=0.18)
     lines = ax.contour(beta1_grid, beta2_grid, mu, levels=list(ISO_LEVELS), colors="0.45",
@@ -142,7 +144,7 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
                Line2D([], [], ls="", marker="*", mfc="none", mec="black", ms=12, label="best")]
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, -0.13), ncol=2, fontsize=8, frameon=False)
     ax.set_xlim(-0.02, 1.02)
-    ax.set_ylim(*beta2_range)
+    ax.set_ylim(*beta2_limits)
     ax.set_xlabel(r"$\beta_1$ (eq. 9: final drop of the relabel rate)")
     ax.set_ylabel(r"$\beta_2$ (eq. 9: shape; 0 = linear)")
     others = len(frame) - len(in_plane)
