@@ -106,8 +106,32 @@ def _html_table(table: pd.DataFrame) -> str:
     return table.to_html(index=False, na_rep="", float_format=lambda v: f"{v:.3f}", border=0, classes="data")
 
 
+def _search_section(folder: Path, out: Path) -> tuple[list[Path], list[str]]:
+    """Figures and best-trial tables of the Optuna studies under ``folder/search`` (hersd-search's
+    default storage) -> (files written, HTML parts); nothing when there is no study."""
+    databases = sorted((folder / "search").glob("*.db"))
+    if not databases:
+        return [], []
+    from analysis.search_figures import study_figures  # imports optuna, only needed here
+
+    written: list[Path] = []
+    parts = ["<h2>Optuna searches</h2>"]
+    for database in databases:
+        files = study_figures(database, out / "search")
+        written += files
+        for path in files:
+            if path.suffix == ".png":
+                parts.append(f'<figure><h3>{html.escape(path.stem)}</h3><img alt="{html.escape(path.stem)}" '
+                             f'src="data:image/png;base64,{base64.b64encode(path.read_bytes()).decode()}"></figure>')
+            elif path.suffix == ".csv":
+                parts += [f"<h3>Best trials: {html.escape(path.stem.removesuffix('_best_trials'))}</h3>",
+                          _html_table(pd.read_csv(path))]
+    return written, parts
+
+
 def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, runs: pd.DataFrame,
-               figures: list[tuple[ReportFigure, str]], window: int, skipped: list[str]) -> str:
+               figures: list[tuple[ReportFigure, str]], window: int, skipped: list[str],
+               search_parts: list[str]) -> str:
     incomplete = int((~runs["complete"]).sum())
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
              f"<p>{_count(len(runs), 'run')} ({incomplete} incomplete), {_count(runs['task'].nunique(), 'task')}, "
@@ -121,6 +145,7 @@ def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, run
     for figure, image in figures:
         parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
                      f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
+    parts += search_parts
     parts += ["<h2>Runs</h2>", _html_table(runs[RUN_LIST_COLUMNS])]
     style = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:1em}"
              "table.data{border-collapse:collapse;font-size:0.85em}"
@@ -180,9 +205,12 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     start = time.perf_counter()
     tables = _write_tables({"summary": analysis.summary, "aggregate": analysis.aggregate,
                             "runs": runs.drop(columns="run")}, out / "tables")
+    search_files, search_parts = _search_section(folder, out)
+    saved += [path for path in search_files if path.suffix != ".csv" and path.suffix != ".md"]
+    tables += [path for path in search_files if path.suffix in (".csv", ".md")]
     index = out / "index.html"
-    index.write_text(_html_page(folder, analysis.summary, analysis.aggregate, runs, embedded, window, table.skipped),
-                     encoding="utf-8")
+    index.write_text(_html_page(folder, analysis.summary, analysis.aggregate, runs, embedded, window, table.skipped,
+                                search_parts), encoding="utf-8")
     timings["html"] = time.perf_counter() - start
     return ReportResult(index=index, figures=saved, tables=tables, timings=timings)
 

@@ -166,6 +166,15 @@ def test_pruning_with_seeds_reported_as_one_rising_step(tmp_path: Path) -> None:
     log = read_run(Path(pruned_run) / "run.mcap")
     assert not log.complete and list(log.epochs["epoch"]) == [1]  # stopped there, resumable
 
+    # hersd-report over the same folder adds the study's figure and best trials
+    from analysis.report import build_report
+
+    report = build_report(tmp_path, log=lambda line: None)
+    page = report.index.read_text()
+    assert "Optuna searches" in page and "beta_plane" in page
+    assert any(path.name.endswith("_beta_plane.png") for path in report.figures)
+    assert any(path.name.endswith("_best_trials.csv") for path in report.tables)
+
 
 # --------------------------------------------------------------------------- whole searches
 def test_ci_search_on_two_workers_with_a_journal(tmp_path: Path, capsys) -> None:
