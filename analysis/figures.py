@@ -220,7 +220,8 @@ def composition_figures(analysis: Analysis) -> list[ReportFigure]:
                            colors=[SHARE_STYLE[c][1] for c in metrics.SHARE_COLUMNS], alpha=0.8, linewidth=0)
             axis.set_title(config, fontsize=10)
             axis.set_ylim(0, 1)
-            axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
+            if panel["epoch"].max() > panel["epoch"].min():
+                axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
         _label_outer(axes, "share of the minibatch")
         _figure_legend(figure, axes[:1], LEGEND_WIDTH, reverse=True, fontsize=9)
         caption = (f"{task_title(task)}: share of each kind of transition in the sampled minibatches, per epoch: real "
