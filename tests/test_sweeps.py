@@ -86,11 +86,11 @@ def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
 
 def test_a_failed_run_does_not_stop_the_sweep(tmp_path):
     # seed 1's run directory is blocked by a file, so that run (only) fails
-    ok = sweep("+grid=smoke", "schedule=constant", "--dry-run", f"results_dir={tmp_path}")
+    ok = sweep("+grid=smoke", "schedule=constant", *TINY, "--dry-run", f"results_dir={tmp_path}")
     blocked = Path([r for r in listed_runs(ok.stdout) if "/seed1-" in r][0])
     blocked.parent.mkdir(parents=True)
     blocked.write_text("in the way")
-    result = sweep("+grid=smoke", "schedule=constant", f"results_dir={tmp_path}", check=False)
+    result = sweep("+grid=smoke", "schedule=constant", *TINY, f"results_dir={tmp_path}", check=False)
     assert result.returncode != 0
     assert "1 done" in result.stdout and "1 failed" in result.stdout
     assert len(list(tmp_path.rglob("run.mcap"))) == 1
