@@ -323,9 +323,10 @@ USAGE = """usage: hersd-train [KEY=VALUE ...]
 Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same
 command resumes an interrupted run from its last checkpoint.
 
-  task=reach|push|pick_and_place|slide     schedule=constant|linear|exponential
+  task=reach|push|pick_and_place|slide     schedule=constant|linear|exponential|paper_linear_025|...|paper_exp_100
   algo=her|archer|her_mep|archer_mep      (*_mep: MEP prioritisation, see docs/MEP.md)
-  schedule.beta1=0.25 schedule.beta2=0.5   seed=0   epochs=200   results_dir=results   quiet=true
+  schedule.beta1=0.25 schedule.beta2=0.5   schedule.mean_rate=0.85 (solves beta1 by eq. 10)
+  seed=0   epochs=200   results_dir=results   quiet=true   checkpoint_every=1
   ddpg.<field>=...  (see hersd/config.py; defaults are the paper's appendix settings)
 """
 
