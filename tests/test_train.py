@@ -154,3 +154,23 @@ def test_fetch_reach_learns_within_5_epochs(tmp_path, seed):
     log = read_run(train(compose(["task=reach", "epochs=5", f"seed={seed}", "quiet=true",
                                   f"results_dir={tmp_path}"])))
     assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()
+
+
+def test_log_is_standard_mcap_whose_messages_follow_their_json_schemas(tmp_path):
+    """Generic MCAP readers (summary-based, not hersd's) read the log; every message validates."""
+    import json
+
+    import jsonschema
+    from mcap.reader import make_reader
+
+    log_path = train(compose([*TINY, "epochs=2", f"results_dir={tmp_path}"]))
+    with open(log_path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count == 4  # meta, 2 epochs, status
+        topics = []
+        for schema, channel, message in reader.iter_messages():
+            assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            jsonschema.validate(json.loads(message.data), json.loads(schema.data))
+            topics.append(channel.topic)
+    assert topics == ["/run/meta", "/epoch", "/epoch", "/run/status"]
