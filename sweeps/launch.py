@@ -27,6 +27,7 @@ from hersd.runs import run_dir
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
+_composed = False  # set once the sweeper is reached: the command line composed into a config
 
 
 @dataclass
@@ -79,6 +80,8 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.core.utils import JobStatus
 
+    global _composed
+    _composed = True
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
     overrides = parser.parse_overrides(sweeper._parse_config() + list(arguments))
     jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
@@ -180,4 +183,17 @@ def main() -> None:
     register_train_schema()
     register_schemas()
     os.environ.setdefault("HYDRA_FULL_ERROR", "0")
-    hydra.main(config_path=str(CONF_DIR), config_name="sweep", version_base="1.3")(run_job)()
+    try:
+        hydra.main(config_path=str(CONF_DIR), config_name="sweep", version_base="1.3")(run_job)()
+    except SystemExit as end:
+        if end.code and not _composed:
+            print(f"hersd-sweep: valid choices: {choices_line(CONF_DIR)}", file=sys.stderr)
+        raise
+
+
+def choices_line(conf_dir: Path) -> str:
+    """One line listing the grid/task/algo/schedule options and the top-level keys."""
+    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(sorted(p.stem for p in (conf_dir / group).glob('*.yaml')))}"
+              for group in ("grid", "task", "algo", "schedule")]
+    keys = [f.name for f in fields(SweepConfig) if f.name not in ("task", "algo", "schedule", "ddpg")]
+    return "  ".join(groups) + f"  keys: {', '.join(keys)}, task.*, algo.*, schedule.*, ddpg.*"
