@@ -57,8 +57,8 @@ class RunningNormalizer:
 
 def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> nn.Sequential:
     layers: list[nn.Module] = []
-    for _ in range(hidden_layers):
-        layers += [nn.Linear(in_dim, hidden_units), nn.ReLU()]
+    for _ in range(hidden_layers):  # in-place ReLU: Linear's backward does not need its output
+        layers += [nn.Linear(in_dim, hidden_units), nn.ReLU(inplace=True)]
         in_dim = hidden_units
     layers.append(nn.Linear(in_dim, out_dim))
     return nn.Sequential(*layers)
