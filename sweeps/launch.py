@@ -41,7 +41,12 @@ class SweepConfig(TrainConfig):
 
 
 class SweepError(RuntimeError):
-    """A sweep cannot start (a run's config is invalid) or ended with failed runs."""
+    """A sweep cannot start (a run's config is invalid: exit code 2) or ended with failed
+    runs (exit code 1)."""
+
+    def __init__(self, message: str, exit_code: int):
+        super().__init__(message)
+        self.exit_code = exit_code
 
 
 def register_schemas() -> None:
@@ -92,7 +97,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         try:
             planned.setdefault(run_dir(job_train_config(job_cfg)), job)
         except ConfigError as err:
-            raise SweepError(f"run [{' '.join(job)}]: {err}") from None
+            raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None
     states = {directory: run_state(directory) for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
@@ -125,7 +130,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         print(f"  failed: {line}", flush=True)
     if outcomes["failed"]:
         raise SweepError(f"{len(outcomes['failed'])} run(s) failed; fix the cause and run the same command "
-                         f"again (finished runs are kept and skipped)")
+                         f"again (finished runs are kept and skipped)", exit_code=1)
     return [results]
 
 

@@ -5,6 +5,7 @@ lives here; the logic it calls is in :mod:`sweeps.launch`.
 """
 
 
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
@@ -33,6 +34,12 @@ class RunStoreSweeper(BasicSweeper):
         self.dry_run = dry_run
 
     def sweep(self, arguments: List[str]) -> Any:
-        from sweeps.launch import sweep_runs
+        """Run the sweep; a :class:`sweeps.launch.SweepError` ends it with one line on stderr
+        (exit 2: a run's config is invalid, nothing ran; exit 1: some runs failed)."""
+        from sweeps.launch import SweepError, sweep_runs
 
-        return sweep_runs(self, arguments)
+        try:
+            return sweep_runs(self, arguments)
+        except SweepError as err:
+            print(f"hersd-sweep: error: {err}", file=sys.stderr, flush=True)
+            sys.exit(err.exit_code)
