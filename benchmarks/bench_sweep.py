@@ -1,10 +1,14 @@
 """Wall-clock of one small sweep with one job at a time vs one job per core (2 here).
 
-Runs ``hersd-sweep +grid=smoke`` (4 FetchReach runs, lengthened to ~20 s each) twice into
-fresh temporary folders, first with ``hydra.launcher.n_jobs=1`` then with ``n_jobs=2``,
-and prints the two times and their ratio. Run it on an otherwise idle machine.
+Runs ``hersd-sweep +grid=smoke`` (4 FetchReach runs) with FetchReach's paper settings per
+epoch (10 cycles, 20 test episodes) and ``--epochs`` epochs (default 8: ~45 s per run) twice
+into fresh temporary folders, first with ``hydra.launcher.n_jobs=1`` then with ``n_jobs=2``,
+and prints the two times and their ratio. Also printed: the start-up costs that do not
+shrink with more jobs (the sweep command composing and checking its runs; each worker
+process importing torch and MuJoCo), which short runs cannot amortise. Run it on an
+otherwise idle machine.
 
-Usage: python benchmarks/bench_sweep.py [--epochs 4]
+Usage: python benchmarks/bench_sweep.py [--epochs 8]
 """
 
 from __future__ import annotations
@@ -16,22 +20,32 @@ import tempfile
 import time
 
 
+SWEEP = ["-c", "from sweeps.launch import main; main()", "+grid=smoke"]
+
+
+def python_seconds(args: list[str]) -> float:
+    """Wall-clock seconds of ``python <args>`` in a fresh interpreter."""
+    tic = time.perf_counter()
+    subprocess.run([sys.executable, *args], check=True, capture_output=True)
+    return time.perf_counter() - tic
+
+
 def sweep_seconds(n_jobs: int, epochs: int) -> float:
     with tempfile.TemporaryDirectory() as results:
-        tic = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "from sweeps.launch import main; main()", "+grid=smoke",
-                        f"epochs={epochs}", "task.cycles_per_epoch=5", "ddpg.batches_per_cycle=40",
-                        f"hydra.launcher.n_jobs={n_jobs}", f"results_dir={results}"],
-                       check=True, capture_output=True)
-        return time.perf_counter() - tic
+        return python_seconds([*SWEEP, f"epochs={epochs}", "task.cycles_per_epoch=10", "ddpg.test_rollouts=10",
+                               f"hydra.launcher.n_jobs={n_jobs}", f"results_dir={results}"])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--epochs", type=int, default=4)
+    parser.add_argument("--epochs", type=int, default=8)
     args = parser.parse_args()
     one = sweep_seconds(1, args.epochs)
     two = sweep_seconds(2, args.epochs)
+    with tempfile.TemporaryDirectory() as results:
+        sweep_start = python_seconds([*SWEEP, "--dry-run", f"results_dir={results}"])
+    worker_start = python_seconds(["-c", "import hersd.train"])
+    print(f"start-up: sweep command {sweep_start:.1f} s, each worker's imports {worker_start:.1f} s")
     print(f"4-run sweep, 1 job at a time: {one:6.1f} s")
     print(f"4-run sweep, 2 jobs at a time: {two:6.1f} s  -> speed-up {one / two:.2f}x")
 
