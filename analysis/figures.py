@@ -36,6 +36,7 @@ SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
 PALETTE = [*colormaps["tab10"].colors[:7], *colormaps["tab10"].colors[8:], *colormaps["Dark2"].colors]
 PANEL_SIZE = (4.4, 3.0)  # inches per panel
 MAX_COLUMNS = 4
+ALTERNATE_DASHES = [":", (0, (6, 2, 1, 2, 1, 2)), (0, (10, 3))]  # for configs whose usual style is taken
 LEGEND_WIDTH = 2.3  # inches reserved right of the panels for a figure legend
 
 
@@ -88,15 +89,21 @@ def schedule_colours(table: pd.DataFrame) -> dict[tuple, tuple | str]:
 def config_styles(analysis: Analysis) -> dict[str, dict]:
     """Line style of every config, the same in every figure: the schedule's colour (ARCHER
     grey instead of black), dashed with MEP, dash-dot for exponential decays (so the two
-    kinds stay apart where they share a panel)."""
+    kinds stay apart where they share a panel). Configs that would still look alike (same
+    schedule, differing in another setting such as epochs) get dotted, then other dash patterns."""
     configs = _config_table(analysis)
     colours = schedule_colours(configs)
     styles = {}
+    used: dict[tuple, int] = {}
     for config, row in configs.iterrows():
         colour = colours[(row["schedule"], row["eps"], row["beta1"], row["beta2"])]
         if row["schedule"] == "constant" and (row["lambda_r"], row["lambda_h"]) == (1.0, 0.5):
             colour = "0.55"
         linestyle = "--" if row["mep"] else ("-." if row["schedule"] == "exponential" else "-")
+        repeats = used.get((colour, linestyle), 0)
+        used[(colour, linestyle)] = repeats + 1
+        if repeats:
+            linestyle = ALTERNATE_DASHES[(repeats - 1) % len(ALTERNATE_DASHES)]
         styles[config] = {"color": colour, "linestyle": linestyle, "linewidth": 1.5}
     return styles
 
@@ -123,6 +130,12 @@ def _panels(count: int, title: str, legend_width: float = 0.0, sharey: bool = Tr
         axis.grid(alpha=0.3)
     figure.suptitle(title, fontsize=12, y=1 - 0.08 / height, va="top")
     return figure, axes[:count]
+
+
+def _legend_width(labels, fontsize: float = 8) -> float:
+    """Inches a figure legend of these labels needs (handle plus text), at least LEGEND_WIDTH."""
+    longest = max((len(str(label)) for label in labels), default=0)
+    return max(LEGEND_WIDTH, 0.7 + 0.075 * longest * fontsize / 8)
 
 
 def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None:
@@ -276,14 +289,15 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
                 versus = " and ".join(baselines) if baselines else "each other (no constant baseline)"
                 name = f"curves_{task}_lr{weights[0]:g}_lh{weights[1]:g}"
                 title = f"{task_title(task)}: decay schedules vs {versus} ({_weights_text(*weights)})"
-            figure, axes = _panels(len(panels), title, legend_width=LEGEND_WIDTH)
+            legend_width = _legend_width(config for _, shown in panels for config in shown)
+            figure, axes = _panels(len(panels), title, legend_width=legend_width)
             for axis, (panel_title, shown) in zip(axes, panels):
                 for config in shown:
                     _draw_curve(axis, medians, config, styles[config])
                 axis.set_title(panel_title, fontsize=10)
                 axis.set_ylim(-0.02, 1.02)
             _label_outer(axes, _success_ylabel(analysis.window))
-            _figure_legend(figure, axes, LEGEND_WIDTH)
+            _figure_legend(figure, axes, legend_width)
             caption = (f"{title}. Each seed's test success is smoothed by a trailing {analysis.window}-epoch moving "
                        "average (the first epochs average the epochs so far); lines are the median over seeds, "
                        "shaded bands the range (min to max) over seeds.")
@@ -301,14 +315,15 @@ def q_figures(analysis: Analysis) -> list[ReportFigure]:
     if q_values.empty or not (configs.loc[shown, "schedule"] != "constant").any():
         return []
     tasks = ordered_tasks(q_values["task"])
+    legend_width = _legend_width(q_values["config"].unique())
     figure, axes = _panels(len(tasks), "Mean critic Q(s, a) over training batches (mean over seeds)",
-                           legend_width=LEGEND_WIDTH, sharey=False)
+                           legend_width=legend_width, sharey=False)
     for axis, task in zip(axes, tasks):
         for config, curve in q_values[q_values["task"] == task].groupby("config", observed=True):
             axis.plot(curve["epoch"], curve["q_mean"], label=config, **{**styles[config], "linewidth": 1.1})
         axis.set_title(task_title(task), fontsize=10)
     _label_outer(axes, "mean Q(s, a)")
-    _figure_legend(figure, axes, LEGEND_WIDTH)
+    _figure_legend(figure, axes, legend_width)
     caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over seeds, for HER and the "
                "decay schedules with the same reward weights (λr = λh = 1); linear decays solid, exponential "
                "dash-dot. An early overestimate that falls sooner means the critic is corrected sooner.")
@@ -328,8 +343,9 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
     tasks = ordered_tasks(medians.loc[medians["config"].isin(mep_configs.index), "task"])
     if not tasks:
         return []
+    legend_width = _legend_width(shown)
     figure, axes = _panels(len(tasks), "Episode prioritisation (MEP) with and without relabel-rate decay",
-                           legend_width=LEGEND_WIDTH)
+                           legend_width=legend_width)
     for axis, task in zip(axes, tasks):
         task_medians = medians[medians["task"] == task]
         for config in [c for c in shown if c in set(task_medians["config"])]:
@@ -337,7 +353,7 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
         axis.set_title(task_title(task), fontsize=10)
         axis.set_ylim(-0.02, 1.02)
     _label_outer(axes, _success_ylabel(analysis.window))
-    _figure_legend(figure, axes, LEGEND_WIDTH)
+    _figure_legend(figure, axes, legend_width)
     caption = ("Configurations with MEP (dashed) beside the same configuration without it: median over seeds of "
                f"the {analysis.window}-epoch moving average of test success, range over seeds shaded.")
     return [ReportFigure("mep", "MEP comparison (Fig. 11)", caption, figure)]

@@ -220,12 +220,9 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
 
     labels = [config_label(r["schedule"], r["eps"], r["beta1"], r["beta2"], r["lambda_r"], r["lambda_h"], r["mep"])
               for r in rows]
-    # Seeds of one label must share every setting; where they do not, say what differs:
-    # first settings outside the task section (across tasks), then task settings within a task.
-    general = [{k: v for k, v in s.items() if not k.startswith("task.")} for s in settings]
-    task_specific = [{k: v for k, v in s.items() if k.startswith("task.")} for s in settings]
-    labels = _distinguish(labels, general, [(label,) for label in labels])
-    labels = _distinguish(labels, task_specific, [(r["task"], label) for r, label in zip(rows, labels)])
+    # Within a task, seeds of one label must share every setting; where they do not, say what
+    # differs. Across tasks a label may differ in budget (epochs, cycles): tasks are strata.
+    labels = _distinguish(labels, settings, [(r["task"], label) for r, label in zip(rows, labels)])
     for row, label in zip(rows, labels):
         row["config"] = label
 

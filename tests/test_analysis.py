@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from analysis import metrics
-from analysis.figures import mep_figures, q_figures
+from analysis.figures import config_styles, mep_figures, q_figures
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
@@ -190,6 +190,18 @@ def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
     write_run(tmp_path / "c", make_config(seed=1, epochs=6), np.zeros(6))
     labels = load_runs(tmp_path).runs.groupby("config", observed=True)["seed"].apply(list).to_dict()
     assert labels == {"HER (epochs=4)": [0], "HER (epochs=6)": [0, 1]}
+
+
+def test_a_label_spans_tasks_with_different_budgets_and_lookalikes_get_distinct_styles(tmp_path):
+    write_run(tmp_path / "reach", make_config(task="reach", epochs=4), np.zeros(4))
+    write_run(tmp_path / "push20", make_config(epochs=20), np.zeros(20))
+    write_run(tmp_path / "push30", make_config(epochs=30), np.zeros(30))
+    table = load_runs(tmp_path)
+    labels = table.runs.groupby(["task", "config"], observed=True)["run"].count().to_dict()
+    assert labels == {("reach", "HER"): 1, ("push", "HER (epochs=20)"): 1, ("push", "HER (epochs=30)"): 1}
+    styles = config_styles(metrics.analyse(table.runs, table.epochs, WINDOW))
+    looks = {(style["color"], str(style["linestyle"])) for style in styles.values()}
+    assert len(looks) == len(styles) == 3
 
 
 def _truncate_inside_epoch(path: Path, epoch: int) -> None:
