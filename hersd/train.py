@@ -29,7 +29,7 @@ from hersd.ddpg import DDPG
 from hersd.envs import EnvSpec, env_spec, goal_reward, make_env
 from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer, Episodes, sample_transitions
-from hersd.runlog import LOG_NAME, RunLogWriter, read_run
+from hersd.runlog import LOG_NAME, RunLogError, RunLogWriter, read_run
 from hersd.runs import config_hash, run_dir
 from hersd.schedules import relabel_rate
 
@@ -39,6 +39,10 @@ CHECKPOINT_NAME = "checkpoint.pt"
 
 class RunLockedError(RuntimeError):
     """Another process is running the same configuration."""
+
+
+class RunStateError(RuntimeError):
+    """A run directory holds a checkpoint or log that cannot be read; the message says what to do."""
 
 
 # --------------------------------------------------------------------------- rollouts
@@ -129,18 +133,49 @@ def train(cfg: TrainConfig, command: str = "", on_epoch: Callable[[dict], None] 
     log_path = directory / LOG_NAME
     checkpoint_path = directory / CHECKPOINT_NAME
     with _run_lock(directory):
-        previous = read_run(log_path) if log_path.exists() else None
+        previous = _read_previous_log(cfg, log_path, checkpoint_path)
         if previous is not None and previous.complete:
             _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), nothing to do")
             return log_path
-        checkpoint = torch.load(checkpoint_path, weights_only=False) if checkpoint_path.exists() else None
+        checkpoint = _load_checkpoint(checkpoint_path) if checkpoint_path.exists() else None
         if previous is not None and checkpoint is None:
-            stale = log_path.with_name(f"run.partial-{time.strftime('%Y%m%d-%H%M%S')}.mcap")
-            os.replace(log_path, stale)
+            stale = _keep_aside(log_path, "partial")
             _say(cfg, f"{log_path}: incomplete and without checkpoint; kept as {stale.name}, starting afresh")
             previous = None
         _train_loop(cfg, directory, log_path, checkpoint_path, previous, checkpoint, command, on_epoch)
     return log_path
+
+
+def _keep_aside(log_path: Path, kind: str) -> Path:
+    """Rename run.mcap to run.<kind>-<time>.mcap next to it; returns the new path."""
+    kept = log_path.with_name(f"run.{kind}-{time.strftime('%Y%m%d-%H%M%S')}.mcap")
+    os.replace(log_path, kept)
+    return kept
+
+
+def _read_previous_log(cfg: TrainConfig, log_path: Path, checkpoint_path: Path):
+    """The run's existing log (None if there is none). A log too damaged to hold even the run's
+    metadata holds no epochs either: it is kept aside and the run starts afresh, unless a
+    checkpoint claims finished epochs, which needs a person to decide."""
+    if not log_path.exists():
+        return None
+    try:
+        return read_run(log_path)
+    except RunLogError as err:
+        if checkpoint_path.exists():
+            raise RunStateError(f"{err}, but {checkpoint_path.name} next to it says epochs were finished; "
+                                f"move both aside to start this run afresh") from None
+        kept = _keep_aside(log_path, "unreadable")
+        _say(cfg, f"{log_path}: unreadable, without checkpoint; kept as {kept.name}, starting afresh")
+        return None
+
+
+def _load_checkpoint(path: Path) -> dict:
+    try:
+        return torch.load(path, weights_only=False)
+    except Exception as err:  # torch raises RuntimeError, EOFError or UnpicklingError on a damaged file
+        raise RunStateError(f"{path} is unreadable ({type(err).__name__}); move it aside to restart this run "
+                            f"from epoch 1 (the epochs in its log are then kept as run.partial-*.mcap)") from None
 
 
 def _say(cfg: TrainConfig, line: str) -> None:
@@ -352,6 +387,9 @@ def main(argv: list[str] | None = None) -> None:
         log_path = train(cfg, command=" ".join(["hersd-train", *argv]))
     except RunLockedError as err:
         print(f"hersd-train: error: {err}; wait for it to finish", file=sys.stderr)
+        sys.exit(2)
+    except RunStateError as err:
+        print(f"hersd-train: error: {err}", file=sys.stderr)
         sys.exit(2)
     print(log_path)
 

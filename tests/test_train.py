@@ -96,6 +96,41 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 
 
+def _stopped_after_epoch_1(tmp_path: Path) -> tuple[list[str], Path]:
+    """A run of 3 epochs stopped after epoch 1 (log + checkpoint on disk) -> (its args, its directory)."""
+    args = [*TINY, "epochs=3", f"results_dir={tmp_path}"]
+
+    def stop(record):
+        raise StopHere
+
+    with pytest.raises(StopHere):
+        train(compose(args), on_epoch=stop)
+    return args, next(tmp_path.rglob("run.mcap")).parent
+
+
+def test_damaged_checkpoint_is_one_line_with_exit_2_and_keeps_the_log(tmp_path, capsys):
+    args, directory = _stopped_after_epoch_1(tmp_path)
+    checkpoint = directory / "checkpoint.pt"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:1000])
+    log_before = (directory / "run.mcap").read_bytes()
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "checkpoint.pt is unreadable" in err and "move it aside" in err
+    assert (directory / "run.mcap").read_bytes() == log_before
+
+
+def test_unreadable_log_without_checkpoint_is_kept_aside_and_the_run_starts_afresh(tmp_path):
+    args, directory = _stopped_after_epoch_1(tmp_path)
+    (directory / "checkpoint.pt").unlink()
+    (directory / "run.mcap").write_bytes(b"not an mcap file")
+    log = read_run(train(compose(args)))
+    assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3]
+    kept = list(directory.glob("run.unreadable-*.mcap"))
+    assert len(kept) == 1 and kept[0].read_bytes() == b"not an mcap file"
+
+
 def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
     log_path = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path}"]))
     data = log_path.read_bytes()
