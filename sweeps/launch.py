@@ -90,6 +90,10 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
     overrides = parser.parse_overrides(sweeper._parse_config() + list(arguments))
     jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
+    if not jobs:
+        seeds = sweeper.config.get("seeds")
+        raise SweepError(f"seeds must be >= 1, got {seeds}" if isinstance(seeds, int) and seeds < 1 else
+                         "the sweep expands to no runs; give each swept key at least one value", exit_code=2)
 
     planned: dict[Path, list[str]] = {}  # run dir -> overrides; a grid naming a run twice runs it once
     for job in jobs:

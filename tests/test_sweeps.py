@@ -62,6 +62,7 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
     (["task=cartpole"], "Available options in 'task'"),
     (["+grid=smoke", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
     (["+grid=smoke", "no_such_key=1"], "keys: seed, epochs"),
+    (["+grid=smoke", "seeds=0"], "seeds must be >= 1, got 0"),
 ])
 def test_bad_input_names_the_choices_and_exits_nonzero(tmp_path, args, expected):
     result = sweep(*args, "--dry-run", f"results_dir={tmp_path}", check=False)
