@@ -89,11 +89,13 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     _composed = True
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
     overrides = parser.parse_overrides(sweeper._parse_config() + list(arguments))
+    try:  # the sweep's own settings (e.g. seeds >= 1), before the grid expands them
+        job_train_config(sweeper.config)
+    except ConfigError as err:
+        raise SweepError(str(err), exit_code=2) from None
     jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
     if not jobs:
-        seeds = sweeper.config.get("seeds")
-        raise SweepError(f"seeds must be >= 1, got {seeds}" if isinstance(seeds, int) and seeds < 1 else
-                         "the sweep expands to no runs; give each swept key at least one value", exit_code=2)
+        raise SweepError("the sweep expands to no runs; give each swept key at least one value", exit_code=2)
 
     planned: dict[Path, list[str]] = {}  # run dir -> overrides; a grid naming a run twice runs it once
     for job in jobs:
