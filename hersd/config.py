@@ -17,14 +17,11 @@ from typing import Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-TASK_ENV_IDS = {
-    "reach": "FetchReach-v4",
-    "push": "FetchPush-v4",
-    "pick_and_place": "FetchPickAndPlace-v4",
-    "slide": "FetchSlide-v4",
-}
+from hersd.schedules import BETA2_LIMIT, SCHEDULE_KINDS, beta1_for_mean_rate
+from hersd.tasks import TASKS
+
 GOAL_STRATEGIES = ("future", "final", "episode")
-SCHEDULE_KINDS = ("constant", "linear", "exponential")
+DEVICES = ("auto", "cpu", "cuda")
 
 
 class ConfigError(ValueError):
@@ -42,20 +39,30 @@ def _is_finite(value: float) -> bool:
 
 @dataclass
 class TaskConfig:
-    name: str = "push"  # short task name: reach | push | pick_and_place | slide
-    env_id: str = "FetchPush-v4"  # gymnasium-robotics environment id
-    cycles_per_epoch: int = 50  # rollout+update cycles per epoch (paper: 50; FetchReach: 10)
+    name: str = "push"  # short task name: a key of hersd.tasks.TASKS (reach | push | pick_and_place | slide)
+    env_id: Optional[str] = None  # gymnasium-robotics environment id; null: the task's (hersd/tasks.py)
+    cycles_per_epoch: Optional[int] = None  # rollout+update cycles per epoch; null: the paper's (50; FetchReach 10)
     # Success radius in metres; null keeps the env's own (0.05 m for every v4 Fetch task).
     # The paper's text states 0.07 m (Push, PickAndPlace) and 0.20 m (Slide).
     distance_threshold: Optional[float] = None
 
     def __post_init__(self) -> None:
-        _check(self.name in TASK_ENV_IDS,
-               f"task={self.name!r} is not a known task; choose one of: {', '.join(TASK_ENV_IDS)}")
-        _check(self.cycles_per_epoch >= 1, f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
+        _check(self.name in TASKS, f"task={self.name!r} is not a known task; choose one of: {', '.join(TASKS)}")
+        task = TASKS[self.name]
+        _check(self.env_id in (None, task.env_id),
+               f"task.env_id={self.env_id!r} does not match task={self.name!r} (expected {task.env_id!r})")
+        _check(self.cycles_per_epoch is None or self.cycles_per_epoch >= 1,
+               f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
         if self.distance_threshold is not None:
             _check(_is_finite(self.distance_threshold) and self.distance_threshold > 0,
                    f"task.distance_threshold must be a positive number of metres or null, got {self.distance_threshold}")
+
+    def resolve(self) -> None:
+        """Fill the null env_id and cycles_per_epoch from the task table (by the training config,
+        not here: the schema's own default instance must stay unresolved)."""
+        task = TASKS[self.name]
+        self.env_id = self.env_id or task.env_id
+        self.cycles_per_epoch = self.cycles_per_epoch or task.cycles_per_epoch
 
 
 @dataclass
@@ -98,7 +105,7 @@ class ScheduleConfig:
     kind: str = "constant"  # constant (HER) | linear (eq. 9, beta2 = 0) | exponential (eq. 9)
     eps: float = 0.8  # the fixed relabel rate of kind=constant (HER: 0.8, i.e. replay_k = 4)
     beta1: float = 0.0  # eq. 9: final drop of the rate, in [0, 1]
-    beta2: float = 0.0  # eq. 9: shape, any real; 0 is linear, > 0 concave, < 0 convex
+    beta2: float = 0.0  # eq. 9: shape, in [-50, 50]; 0 is linear, > 0 concave, < 0 convex
     # If set, beta1 is solved from it: the beta1 whose mean rate over the run's K epochs
     # (eq. 10, exact) equals mean_rate. Used by the iso_mu grid and the search.
     mean_rate: Optional[float] = None
@@ -110,7 +117,9 @@ class ScheduleConfig:
                f"schedule.eps must be a number in [0, 1], got {self.eps}")
         _check(_is_finite(self.beta1) and 0.0 <= self.beta1 <= 1.0,
                f"schedule.beta1 must be a number in [0, 1], got {self.beta1}")
-        _check(_is_finite(self.beta2), f"schedule.beta2 must be a finite real number, got {self.beta2}")
+        _check(_is_finite(self.beta2) and abs(self.beta2) <= BETA2_LIMIT,
+               f"schedule.beta2 must be a number in [-{BETA2_LIMIT:g}, {BETA2_LIMIT:g}] (eq. 9 is a step "
+               f"function beyond), got {self.beta2}")
         _check(self.kind != "linear" or self.beta2 == 0.0,
                f"schedule.beta2 must be 0 for schedule=linear (got {self.beta2}); use schedule=exponential")
         if self.mean_rate is not None:
@@ -120,14 +129,13 @@ class ScheduleConfig:
                    f"schedule.mean_rate must be a number in [0, 1], got {self.mean_rate}")
 
     def solve_beta1(self, total_epochs: int) -> None:
-        """Set beta1 from mean_rate (eq. 10 is linear in beta1: mu = 1 - beta1 * mean_k (k/K)^exp(beta2))."""
+        """Set beta1 from mean_rate (see :func:`hersd.schedules.beta1_for_mean_rate`)."""
         if self.mean_rate is None:
             return
-        steps = [(k / total_epochs) ** math.exp(self.beta2) for k in range(1, total_epochs + 1)]
-        beta1 = (1.0 - self.mean_rate) / (sum(steps) / total_epochs)
+        beta1 = beta1_for_mean_rate(self.mean_rate, self.beta2, total_epochs)
         _check(beta1 <= 1.0, f"schedule.mean_rate={self.mean_rate} with beta2={self.beta2} needs beta1="
                              f"{beta1:.3f} > 1; raise mean_rate or lower beta2")
-        self.beta1 = round(beta1, 6)
+        self.beta1 = beta1
 
 
 @dataclass
@@ -176,19 +184,27 @@ class TrainConfig:
     seed: int = 0  # one seed, one result (every RNG is derived from it)
     epochs: int = 200  # K in eq. 9 (the paper trains 200 epochs)
     results_dir: str = "results"  # run directories are created below this folder
-    run_dir: Optional[str] = None  # null: derived from the config (see hersd.runs.run_dir)
+    run_dir: Optional[str] = None  # null: derived from the config (see hersd.runstore.run_dir)
     checkpoint_every: int = 1  # save an exact-resume checkpoint every N epochs (0: never)
     keep_checkpoint: bool = False  # keep the checkpoint after the run completes (it can be large)
     quiet: bool = False  # no per-epoch progress lines (sweeps)
+    # Intra-op threads of the run's updates: auto = this machine's cores / runs sharing it (a lone
+    # run: all cores; sweeps and searches divide the cores among their runs); or a number >= 1.
+    # Thread counts can change floating-point sums: logged, not part of the run's identity.
+    threads: str = "auto"
+    device: str = "auto"  # where networks and updates run: auto (cuda if available, else cpu) | cpu | cuda[:N]
 
     def __post_init__(self) -> None:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
         _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
         _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        _check(self.threads == "auto" or (self.threads.isdigit() and int(self.threads) >= 1),
+               f"threads must be auto or a whole number >= 1, got {self.threads!r}")
+        _check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (
+            self.device.startswith("cuda:") and self.device[5:].isdigit())),
+            f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+        self.task.resolve()
         self.schedule.solve_beta1(self.epochs)
-        _check(TASK_ENV_IDS.get(self.task.name) == self.task.env_id,
-               f"task.env_id={self.task.env_id!r} does not match task={self.task.name!r} "
-               f"(expected {TASK_ENV_IDS.get(self.task.name)!r})")
 
 
 def register_schemas() -> None:

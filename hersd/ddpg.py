@@ -6,6 +6,9 @@
 - target Q clipped to [q_min, 0] (q_min = -max(lambda) / (1 - gamma)); no done mask;
 - actor loss = -mean Q(s, pi(s)) + action_l2 * mean((pi / max_action)^2);
 - targets are moved by polyak averaging once per cycle (:meth:`DDPG.update_targets`).
+
+Networks, optimiser and normaliser statistics live on ``device``; minibatches arrive as numpy
+arrays from the host-side replay buffer and are moved there once per update.
 """
 
 from __future__ import annotations
@@ -24,13 +27,13 @@ from hersd.replay import TransitionBatch
 class RunningNormalizer:
     """Running mean/std of vectors of size dim, from sums kept in float64."""
 
-    def __init__(self, dim: int, eps: float, clip: float):
-        self.eps, self.clip = eps, clip
+    def __init__(self, dim: int, eps: float, clip: float, device: torch.device):
+        self.eps, self.clip, self.device = eps, clip, device
         self.total = np.zeros(dim)
         self.total_sq = np.zeros(dim)
         self.count = 0
-        self.mean = torch.zeros(dim)
-        self.std = torch.ones(dim)
+        self.mean = torch.zeros(dim, device=device)
+        self.std = torch.ones(dim, device=device)
 
     def update(self, values: np.ndarray) -> None:
         """Add values (n, dim) to the statistics and recompute mean and std."""
@@ -40,8 +43,8 @@ class RunningNormalizer:
         self.count += values.shape[0]
         mean = self.total / self.count
         std = np.sqrt(np.maximum(self.eps ** 2, self.total_sq / self.count - np.square(mean)))
-        self.mean = torch.as_tensor(mean, dtype=torch.float32)
-        self.std = torch.as_tensor(std, dtype=torch.float32)
+        self.mean = torch.as_tensor(mean, dtype=torch.float32, device=self.device)
+        self.std = torch.as_tensor(std, dtype=torch.float32, device=self.device)
 
     def __call__(self, values: torch.Tensor) -> torch.Tensor:
         return torch.clamp((values - self.mean) / self.std, -self.clip, self.clip)
@@ -77,24 +80,28 @@ class DDPG:
     """Actor, critic, their targets and optimisers, and the input normalisers."""
 
     def __init__(self, cfg: DDPGConfig, obs_dim: int, goal_dim: int, action_dim: int, max_action: float,
-                 gamma: float, q_min: float):
-        self.cfg, self.max_action, self.gamma, self.q_min = cfg, max_action, gamma, q_min
-        self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm)
-        self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm)
+                 gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
+        self.cfg, self.max_action, self.gamma, self.q_min, self.device = cfg, max_action, gamma, q_min, device
+        self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm, device)
+        self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm, device)
         in_dim = obs_dim + goal_dim
-        self.actor = mlp(in_dim, action_dim, cfg.hidden_layers, cfg.hidden_units)
-        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units)
+        self.actor = mlp(in_dim, action_dim, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         # One Adam over both networks (one parameter group each): a single fused step per update.
         self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
                                            {"params": self.critic.parameters(), "lr": cfg.critic_lr}], fused=True)
 
+    def tensor(self, array: np.ndarray) -> torch.Tensor:
+        """A host numpy array as a tensor on the agent's device (no copy on the CPU)."""
+        return torch.from_numpy(array).to(self.device)
+
     def _inputs(self, obs: np.ndarray, goal: np.ndarray) -> torch.Tensor:
         """Raw obs (B, obs_dim) and goal (B, goal_dim) -> normalised actor input (B, obs_dim + goal_dim)."""
         clip = self.cfg.clip_obs
-        obs_t = torch.from_numpy(np.clip(obs, -clip, clip, dtype=np.float32))
-        goal_t = torch.from_numpy(np.clip(goal, -clip, clip, dtype=np.float32))
+        obs_t = self.tensor(np.clip(obs, -clip, clip, dtype=np.float32))
+        goal_t = self.tensor(np.clip(goal, -clip, clip, dtype=np.float32))
         return torch.cat([self.obs_norm(obs_t), self.goal_norm(goal_t)], dim=1)
 
     def update_normalizers(self, obs: np.ndarray, goal: np.ndarray) -> None:
@@ -109,7 +116,7 @@ class DDPG:
         With explore: add N(0, noise_eps * max_action), clip, then with probability
         random_eps replace the whole action by a uniform random one.
         """
-        action = (torch.tanh(self.actor(self._inputs(obs, goal))) * self.max_action).numpy().astype(np.float64)
+        action = (torch.tanh(self.actor(self._inputs(obs, goal))) * self.max_action).cpu().numpy().astype(np.float64)
         if not explore:
             return action
         cfg = self.cfg
@@ -128,8 +135,8 @@ class DDPG:
         """
         inputs = self._inputs(batch.obs, batch.goal)
         next_inputs = self._inputs(batch.next_obs, batch.goal)
-        action = torch.from_numpy(batch.action) / self.max_action
-        reward = torch.from_numpy(batch.reward).unsqueeze(1)
+        action = self.tensor(batch.action) / self.max_action
+        reward = self.tensor(batch.reward).unsqueeze(1)
         with torch.no_grad():
             next_action = torch.tanh(self.actor_target(next_inputs))
             next_q = self.critic_target(torch.cat([next_inputs, next_action], dim=1))

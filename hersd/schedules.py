@@ -7,16 +7,29 @@ eps is the probability that a sampled transition's goal is replaced by a hindsig
 - ``exponential``:  eps(k) = 1 - beta1 * (k / K) ** exp(beta2)    (eq. 9)
 
 mu_eps is the mean rate over the K epochs: exactly (eq. 10) or by the continuous
-approximation 1 - beta1 / (1 + exp(beta2)) (eq. 11).
+approximation 1 - beta1 / (1 + exp(beta2)) (eq. 11). A schedule is anything with the
+attributes ``kind``, ``eps``, ``beta1`` and ``beta2`` (e.g. :class:`hersd.config.ScheduleConfig`).
+This module imports neither torch nor the config, so every layer can use it.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from hersd.config import ScheduleConfig
+SCHEDULE_KINDS = ("constant", "linear", "exponential")  # also the order of reports and tables
+# mu_eps between the HER paper's two best fixed rates (replay_k = 4 and 8): the seed paper's
+# "optimal region" (its Fig. 12), drawn in the mu_eps and beta-plane figures.
+MU_EPS_BAND = (0.8, 0.889)
+# |beta2| beyond this makes eq. 9 a step function in float64 (and exp(beta2) overflows past ~709).
+BETA2_LIMIT = 50.0
+
+
+def effective_beta2(kind: str, beta2: float) -> float:
+    """The beta2 of eq. 9 that a schedule of this kind uses: 0 for ``linear``, beta2 otherwise."""
+    return 0.0 if kind == "linear" else float(beta2)
 
 
 def decay_rate(k: int | np.ndarray, total_epochs: int, beta1: float, beta2: float) -> float | np.ndarray:
@@ -24,14 +37,13 @@ def decay_rate(k: int | np.ndarray, total_epochs: int, beta1: float, beta2: floa
     return 1.0 - beta1 * (np.asarray(k, dtype=float) / total_epochs) ** math.exp(beta2)
 
 
-def relabel_rate(schedule: ScheduleConfig, k: int, total_epochs: int) -> float:
+def relabel_rate(schedule: Any, k: int, total_epochs: int) -> float:
     """The relabel rate in force during epoch k (1-based) of total_epochs."""
     if not 1 <= k <= total_epochs:
         raise ValueError(f"epoch index k={k} is outside 1..{total_epochs}")
     if schedule.kind == "constant":
         return float(schedule.eps)
-    beta2 = 0.0 if schedule.kind == "linear" else schedule.beta2
-    return float(decay_rate(k, total_epochs, schedule.beta1, beta2))
+    return float(decay_rate(k, total_epochs, schedule.beta1, effective_beta2(schedule.kind, schedule.beta2)))
 
 
 def mean_rate_exact(beta1: float, beta2: float, total_epochs: int) -> float:
@@ -45,9 +57,24 @@ def mean_rate_approx(beta1: float | np.ndarray, beta2: float | np.ndarray) -> fl
     return 1.0 - np.asarray(beta1, dtype=float) / (1.0 + np.exp(np.asarray(beta2, dtype=float)))
 
 
-def schedule_mean_rate(schedule: ScheduleConfig, total_epochs: int) -> float:
-    """mu_eps of a configured schedule over total_epochs (eq. 10; eps itself for constant)."""
+def schedule_mean_rate(schedule: Any, total_epochs: int) -> float:
+    """mu_eps of a schedule over total_epochs (eq. 10; eps itself for constant)."""
     if schedule.kind == "constant":
         return float(schedule.eps)
-    beta2 = 0.0 if schedule.kind == "linear" else schedule.beta2
-    return mean_rate_exact(schedule.beta1, beta2, total_epochs)
+    return mean_rate_exact(schedule.beta1, effective_beta2(schedule.kind, schedule.beta2), total_epochs)
+
+
+def schedule_mean_rates(kind: str, eps: float | None, beta1: float | None, beta2: float | None,
+                        total_epochs: int) -> tuple[float, float]:
+    """mu_eps of a schedule given by its parameters: (exact over total_epochs (eq. 10), eq. 11)."""
+    if kind == "constant":
+        return float(eps), float(eps)
+    beta2 = effective_beta2(kind, beta2 or 0.0)
+    return mean_rate_exact(beta1, beta2, total_epochs), float(mean_rate_approx(beta1, beta2))
+
+
+def beta1_for_mean_rate(mean_rate: float, beta2: float, total_epochs: int) -> float:
+    """The beta1 whose schedule has mean rate ``mean_rate`` over total_epochs (eq. 10 is linear
+    in beta1: mu = 1 - beta1 * mean_k (k/K)^exp(beta2)); rounded to 6 decimals."""
+    steps = [(k / total_epochs) ** math.exp(beta2) for k in range(1, total_epochs + 1)]
+    return round((1.0 - mean_rate) / (sum(steps) / total_epochs), 6)

@@ -20,10 +20,13 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig, open_dict
 
+from hersd.compose import CONFIG_PATH, group_options, register_schema, register_train_schema
 from hersd.config import ConfigError, TrainConfig, to_train_config
-from hersd.runs import run_dir
+from hersd.resources import available_cores
+from hersd.runstore import RunLockedError, run_dir, run_state
+from sweeps.hydra_private import grid_overrides, job_error
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
@@ -50,9 +53,9 @@ class SweepError(RuntimeError):
 
 
 def register_schemas() -> None:
-    from hydra.core.config_store import ConfigStore
-
-    ConfigStore.instance().store(name="sweep_schema", node=SweepConfig)
+    """``train_schema`` and ``sweep_schema`` (which conf/sweep.yaml lists first)."""
+    register_train_schema()
+    register_schema("sweep_schema", SweepConfig)
 
 
 def job_train_config(cfg: DictConfig) -> TrainConfig:
@@ -65,18 +68,24 @@ def job_train_config(cfg: DictConfig) -> TrainConfig:
     return TrainConfig(**{f.name: getattr(sweep_cfg, f.name) for f in fields(TrainConfig)})
 
 
-def run_state(directory: Path) -> str:
-    """``complete``, ``resumable`` (a checkpoint exists) or ``new``."""
-    from hersd.runlog import LOG_NAME, RunLogError, read_run
+def concurrent_runs(launcher: DictConfig, n_runs: int) -> int:
+    """How many of the sweep's ``n_runs`` share this machine's cores at once: joblib's n_jobs
+    (-1: one per core), all of them for submitit_local, 1 for SLURM (each job has its own
+    allocation) and for Hydra's basic launcher (one after another)."""
+    target = str(launcher.get("_target_", ""))
+    if target.endswith("JoblibLauncher"):
+        n_jobs = int(launcher.get("n_jobs") or -1)
+        at_once = n_jobs if n_jobs > 0 else max(1, available_cores() + 1 + n_jobs)  # joblib's rule for n_jobs < 0
+    elif target.endswith("submitit_launcher.LocalLauncher"):
+        at_once = int(launcher.get("array_parallelism") or n_runs)
+    else:
+        at_once = 1
+    return max(1, min(at_once, n_runs))
 
-    log_path = directory / LOG_NAME
-    if log_path.exists():
-        try:
-            if read_run(log_path).complete:
-                return "complete"
-        except RunLogError:
-            pass
-    return "resumable" if (directory / "checkpoint.pt").exists() else "new"
+
+def with_threads(job: list[str], threads: int) -> list[str]:
+    """A job's overrides with ``threads=<threads>`` unless it sets threads itself."""
+    return job if any(o.split("=", 1)[0].lstrip("+") == "threads" for o in job) else [*job, f"threads={threads}"]
 
 
 # --------------------------------------------------------------------------- in the sweeping process
@@ -88,9 +97,9 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     global _composed
     _composed = True
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
-    overrides = parser.parse_overrides(sweeper._parse_config() + list(arguments))
+    overrides = parser.parse_overrides(grid_overrides(sweeper) + list(arguments))
     try:  # the sweep's own settings (e.g. seeds >= 1), before the grid expands them
-        job_train_config(sweeper.config)
+        sweep_threads = job_train_config(sweeper.config).threads
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
     jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
@@ -116,6 +125,9 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     to_launch = [job for directory, job in planned.items() if states[directory] != "complete"]
     if not to_launch:
         return []
+    if sweep_threads == "auto":  # threads=auto: the cores divided among the runs in flight at once
+        threads = max(1, available_cores() // concurrent_runs(sweeper.config.hydra.launcher, len(to_launch)))
+        to_launch = [with_threads(job, threads) for job in to_launch]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
@@ -124,7 +136,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": []}
     for job, result in zip(to_launch, results):
         if result.status == JobStatus.FAILED:
-            outcomes["failed"].append(f"[{' '.join(job)}]: {result._return_value}")
+            outcomes["failed"].append(f"[{' '.join(job)}]: {job_error(result)}")
         else:
             outcome = result.return_value
             detail = outcome["run_dir"] + (f" (see {outcome['error_log']})" if outcome.get("error_log") else "")
@@ -145,7 +157,7 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     """Train one run of the sweep; never raises, so one failure does not stop the others."""
     from hydra.core.hydra_config import HydraConfig
 
-    from hersd.train import RunLockedError, train
+    from hersd.train import train
 
     hydra_cfg = HydraConfig.get()
     train_cfg = job_train_config(cfg)
@@ -186,25 +198,21 @@ def main() -> None:
     """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs."""
     import hydra
 
-    from hersd.config import register_schemas as register_train_schema
-    from hersd.train import CONF_DIR
-
     if "--dry-run" in sys.argv:
         sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
-    register_train_schema()
     register_schemas()
     os.environ.setdefault("HYDRA_FULL_ERROR", "0")
     try:
-        hydra.main(config_path=str(CONF_DIR), config_name="sweep", version_base="1.3")(run_job)()
+        hydra.main(config_path=CONFIG_PATH, config_name="sweep", version_base="1.3")(run_job)()
     except SystemExit as end:
         if end.code and not _composed:
-            print(f"hersd-sweep: valid choices: {choices_line(CONF_DIR)}", file=sys.stderr)
+            print(f"hersd-sweep: valid choices: {choices_line()}", file=sys.stderr)
         raise
 
 
-def choices_line(conf_dir: Path) -> str:
+def choices_line() -> str:
     """One line listing the grid/task/algo/schedule options and the top-level keys."""
-    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(sorted(p.stem for p in (conf_dir / group).glob('*.yaml')))}"
+    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(group_options(group))}"
               for group in ("grid", "task", "algo", "schedule")]
     keys = [f.name for f in fields(SweepConfig) if f.name not in ("task", "algo", "schedule", "ddpg")]
     return "  ".join(groups) + f"  keys: {', '.join(keys)}, task.*, algo.*, schedule.*, ddpg.*"

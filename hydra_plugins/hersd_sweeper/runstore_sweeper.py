@@ -9,8 +9,9 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
-from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.config_store import ConfigStore
+
+from sweeps.hydra_private import basic_sweeper_class
 
 
 @dataclass
@@ -24,7 +25,7 @@ class RunStoreSweeperConf:
 ConfigStore.instance().store(group="hydra/sweeper", name="runstore", node=RunStoreSweeperConf, provider="hersd")
 
 
-class RunStoreSweeper(BasicSweeper):
+class RunStoreSweeper(basic_sweeper_class()):
     """Expands the grid like BasicSweeper, then checks, lists or launches the runs and
     ends with a summary (see :func:`sweeps.launch.sweep_runs`)."""
 

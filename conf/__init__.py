@@ -1,0 +1,1 @@
+"""hersd's Hydra configs (YAML): shipped inside the package as ``hersd.conf``; see hersd/compose.py."""

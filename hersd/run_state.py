@@ -1,0 +1,114 @@
+"""One run's state: the agent, the replay buffer, the MEP prioritiser, the RNGs, the envs and
+the counters, with :meth:`RunState.state_dict` / :meth:`RunState.load_state_dict` as the one
+checkpoint format (an exact resume: the next epoch gives the numbers an uninterrupted run gives).
+
+Randomness comes from one ``SeedSequence(seed)`` spawned four ways: the sampling and
+exploration Generator, torch (network initialisation), the training envs and the test envs.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from hersd.config import TrainConfig
+from hersd.ddpg import DDPG
+from hersd.envs import env_spec, goal_reward, make_env
+from hersd.mep import EpisodePrioritizer
+from hersd.replay import EpisodeBuffer
+
+
+class RunState:
+    """Everything one training run changes as it goes; built from its config alone.
+
+    ``epochs_done`` counts finished epochs; ``env_steps`` and ``updates`` are cumulative.
+    ``spec`` holds the task's sizes; ``gamma`` and ``q_min`` (the lower clip of target Q,
+    -max(lambda_r, lambda_h) / (1 - gamma)) follow from it and the config.
+    """
+
+    def __init__(self, cfg: TrainConfig, device: torch.device = torch.device("cpu")):
+        self.cfg = cfg
+        d = cfg.ddpg
+        seeds = np.random.SeedSequence(cfg.seed).spawn(4)  # sampling/exploration, torch, train envs, test envs
+        self.rng = np.random.default_rng(seeds[0])
+        torch.manual_seed(int(seeds[1].generate_state(1)[0]))
+        self.train_envs = [make_env(cfg.task) for _ in range(d.rollouts_per_cycle)]
+        self.test_envs = [make_env(cfg.task) for _ in range(d.rollouts_per_cycle)]
+        for envs, seq in ((self.train_envs, seeds[2]), (self.test_envs, seeds[3])):
+            for env, env_seed in zip(envs, seq.generate_state(len(envs))):
+                env.reset(seed=int(env_seed))
+        self.spec = spec = env_spec(self.train_envs[0])
+        self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
+        self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
+        self.agent = DDPG(d, spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, self.gamma,
+                          self.q_min, device)
+        self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
+        # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
+        self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
+        self.epochs_done = self.env_steps = self.updates = 0
+
+    def reward(self, achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The task's sparse reward for achieved and desired goals (..., goal_dim) -> (...,)."""
+        return goal_reward(achieved, goal, self.spec.distance_threshold)
+
+    def effective_totals(self) -> dict[str, Any]:
+        """Totals that make runs comparable whatever the worker layout (logged with the run)."""
+        cfg, d, horizon = self.cfg, self.cfg.ddpg, self.spec.horizon
+        steps_per_cycle = d.rollouts_per_cycle * horizon
+        return {"horizon": horizon, "gamma": self.gamma, "q_target_range": [self.q_min, 0.0],
+                "distance_threshold": self.spec.distance_threshold, "batch_size": d.batch_size,
+                "env_steps_per_epoch": cfg.task.cycles_per_epoch * steps_per_cycle,
+                "updates_per_epoch": cfg.task.cycles_per_epoch * d.batches_per_cycle,
+                "updates_per_env_step": d.batches_per_cycle / steps_per_cycle,
+                "test_episodes_per_epoch": d.test_rollouts * d.rollouts_per_cycle,
+                "buffer_episodes": self.buffer.capacity}
+
+    def state_dict(self) -> dict[str, Any]:
+        """The checkpoint: buffer arrays as tensors, RNG states, counters (``epoch`` = epochs done)."""
+        state = {"epoch": self.epochs_done, "agent": self.agent.state_dict(),
+                 "buffer": {k: torch.from_numpy(v) if isinstance(v, np.ndarray) else v
+                            for k, v in self.buffer.state_dict().items()},
+                 "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+                 "env_rngs": [env.np_random.bit_generator.state for env in self.train_envs + self.test_envs],
+                 "env_steps": self.env_steps, "updates": self.updates}
+        if self.prioritizer is not None:
+            state["mep"] = self.prioritizer.state_dict()
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`state_dict`; the run continues with epoch ``state["epoch"] + 1``."""
+        self.agent.load_state_dict(state["agent"])
+        self.buffer.load_state_dict({k: v.numpy() if torch.is_tensor(v) else v for k, v in state["buffer"].items()})
+        self.rng.bit_generator.state = state["rng"]
+        torch.set_rng_state(state["torch_rng"])
+        for env, env_rng in zip(self.train_envs + self.test_envs, state["env_rngs"]):
+            env.np_random.bit_generator.state = env_rng
+        self.epochs_done, self.env_steps, self.updates = state["epoch"], state["env_steps"], state["updates"]
+        if self.prioritizer is not None:
+            self.prioritizer.load_state_dict(state["mep"])
+
+    def close(self) -> None:
+        for env in self.train_envs + self.test_envs:
+            env.close()
+
+
+def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    """Write a state dict atomically (a temporary file renamed into place)."""
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path: Path, device: torch.device) -> dict[str, Any]:
+    """Read a state dict, tensors of the networks and optimiser onto ``device``.
+
+    Raises the underlying error (RuntimeError, EOFError, UnpicklingError) on a damaged file.
+    """
+    state = torch.load(path, weights_only=False, map_location=device)
+    state["torch_rng"] = state["torch_rng"].cpu()  # the CPU generator's state stays on the CPU
+    state["buffer"] = {k: v.cpu() if torch.is_tensor(v) else v for k, v in state["buffer"].items()}
+    return state

@@ -1,0 +1,119 @@
+"""The run store: where a run lives and what state it is in, shared by training, sweeps and
+the search. Light (no torch): a sweep plans hundreds of runs with it.
+
+``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` holds
+
+- ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
+- ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
+- ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
+- ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
+
+The hash covers every config field that changes what the run computes
+(:data:`NOT_HASHED` lists the others), so two configs never share a directory and the same
+config always maps to the same one: that is what lets sweeps skip and resume runs.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import time
+from contextlib import contextmanager
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Iterator
+
+from hersd.config import ConfigError, ScheduleConfig, TrainConfig
+from hersd.runlog import LOG_NAME, RunLogError, read_run
+
+CHECKPOINT_NAME = "checkpoint.pt"
+LOCK_NAME = "run.lock"
+# Fields that change where, how loudly or how fast a run is written, not what it computes.
+NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device")
+# Fields added to the schema after runs were made: left out of the hash while they hold this
+# value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
+HASHED_UNLESS: dict[str, Any] = {}
+RUN_STATES = ("complete", "resumable", "new")
+
+
+class RunLockedError(RuntimeError):
+    """Another process is running the same configuration."""
+
+
+def schedule_tag(schedule: ScheduleConfig) -> str:
+    """e.g. ``constant-0.8``, ``linear-b1_0.25``, ``exponential-b1_0.5-b2_-1``."""
+    if schedule.kind == "constant":
+        return f"constant-{schedule.eps:g}"
+    if schedule.kind == "linear":
+        return f"linear-b1_{schedule.beta1:g}"
+    return f"exponential-b1_{schedule.beta1:g}-b2_{schedule.beta2:g}"
+
+
+def hashed_fields(cfg: TrainConfig) -> dict[str, Any]:
+    """The config as a nested dict, less :data:`NOT_HASHED` and the :data:`HASHED_UNLESS` defaults."""
+    content = {k: v for k, v in asdict(cfg).items() if k not in NOT_HASHED}
+    for dotted, earlier_value in HASHED_UNLESS.items():
+        *parents, leaf = dotted.split(".")
+        node = content
+        for key in parents:
+            node = node[key]
+        if node.get(leaf) == earlier_value:
+            del node[leaf]
+    return content
+
+
+def config_hash(cfg: TrainConfig) -> str:
+    """8 hex digits identifying everything that determines the run's result."""
+    return hashlib.sha256(json.dumps(hashed_fields(cfg), sort_keys=True).encode()).hexdigest()[:8]
+
+
+def run_dir(cfg: TrainConfig) -> Path:
+    """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
+    if cfg.run_dir is not None:
+        return Path(cfg.run_dir)
+    return (Path(cfg.results_dir) / cfg.task.name / cfg.algo.name / schedule_tag(cfg.schedule)
+            / f"seed{cfg.seed}-{config_hash(cfg)}")
+
+
+def run_state(directory: Path) -> str:
+    """``complete`` (its log says so), ``resumable`` (a checkpoint exists) or ``new``."""
+    log_path = directory / LOG_NAME
+    if log_path.exists():
+        try:
+            if read_run(log_path).complete:
+                return "complete"
+        except RunLogError:
+            pass
+    return "resumable" if (directory / CHECKPOINT_NAME).exists() else "new"
+
+
+@contextmanager
+def run_lock(directory: Path) -> Iterator[None]:
+    """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it."""
+    with open(directory / LOCK_NAME, "w") as lock_file:
+        try:
+            fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RunLockedError(f"{directory} is being run by another process") from None
+        yield
+
+
+def keep_aside(path: Path, why: str) -> Path:
+    """Rename ``run.mcap`` to ``run.<why>-<time>.mcap`` (any file likewise) next to it; returns the new path."""
+    kept = path.with_name(f"{path.name.split('.')[0]}.{why}-{time.strftime('%Y%m%d-%H%M%S')}{path.suffix}")
+    os.replace(path, kept)
+    return kept
+
+
+def check_writable(directory: Path) -> None:
+    """Fail early (ConfigError) if ``directory`` cannot be created or written."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        raise ConfigError(f"results_dir: cannot write to {directory} ({err.strerror}); "
+                          f"pass results_dir=<a writable folder>") from None
