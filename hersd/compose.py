@@ -29,12 +29,13 @@ def register_train_schema() -> None:
     register_schema("train_schema", TrainConfig)
 
 
-def compose(config_name: str | None, overrides: list[str], job_name: str) -> DictConfig:
-    """The named config (or none: only the overrides' groups) composed with command-line overrides."""
+def compose(config_name: str | None, overrides: list[str], job_name: str, with_hydra: bool = False) -> DictConfig:
+    """The named config (or none: only the overrides' groups) composed with command-line overrides;
+    ``with_hydra`` keeps the ``hydra`` node (launcher, sweeper)."""
     from hydra import compose as hydra_compose, initialize_config_module
 
     with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3", job_name=job_name):
-        return hydra_compose(config_name=config_name, overrides=overrides)
+        return hydra_compose(config_name=config_name, overrides=overrides, return_hydra_config=with_hydra)
 
 
 def compose_train(overrides: list[str]) -> TrainConfig:

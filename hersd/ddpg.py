@@ -126,6 +126,13 @@ class DDPG:
         take_random = rng.random((action.shape[0], 1)) < cfg.random_eps
         return np.where(take_random, random_action, action)
 
+    @torch.no_grad()
+    def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
+        """r + gamma * Q'(s', pi'(s')) clipped to [q_min, 0]: next_inputs (B, in_dim), reward (B, 1) -> (B, 1)."""
+        next_action = torch.tanh(self.actor_target(next_inputs))
+        next_q = self.critic_target(torch.cat([next_inputs, next_action], dim=1))
+        return torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
+
     def update(self, batch: TransitionBatch) -> UpdateStats:
         """One simultaneous actor and critic step on a batch of B transitions.
 
@@ -136,11 +143,7 @@ class DDPG:
         inputs = self._inputs(batch.obs, batch.goal)
         next_inputs = self._inputs(batch.next_obs, batch.goal)
         action = self.tensor(batch.action) / self.max_action
-        reward = self.tensor(batch.reward).unsqueeze(1)
-        with torch.no_grad():
-            next_action = torch.tanh(self.actor_target(next_inputs))
-            next_q = self.critic_target(torch.cat([next_inputs, next_action], dim=1))
-            target_q = torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
+        target_q = self.target_q(next_inputs, self.tensor(batch.reward).unsqueeze(1))
         q = self.critic(torch.cat([inputs, action], dim=1))
         critic_loss = torch.mean(torch.square(target_q - q))
         policy_action = torch.tanh(self.actor(inputs))  # = pi(s) / max_action

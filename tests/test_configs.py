@@ -1,33 +1,34 @@
-"""Every file under conf/ composes into a valid config."""
+"""Every file under conf/ composes into a valid config; the schema's defaults are the paper's."""
 
-from pathlib import Path
+from __future__ import annotations
 
 import pytest
 
-from hersd.config import TASK_ENV_IDS
-from hersd.train import CONF_DIR, compose
-
-
-def options(group: str) -> list[str]:
-    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+from hersd.compose import compose, compose_train, group_options
+from hersd.config import TrainConfig
+from hersd.runstore import NOT_HASHED, config_hash, hashed_fields
+from hersd.tasks import TASKS
+from sweeps.launch import register_schemas
 
 
 @pytest.mark.parametrize("group", ["task", "algo", "schedule"])
 def test_every_group_option_composes(group):
-    assert options(group)
-    for option in options(group):
-        cfg = compose([f"{group}={option}"])
-        assert getattr(cfg, group) is not None
+    assert group_options(group)
+    for option in group_options(group):
+        cfg = compose_train([f"{group}={option}"])
+        assert isinstance(cfg, TrainConfig)
 
 
-def test_tasks_match_the_env_table_and_reach_uses_10_cycles():
-    assert options("task") == sorted(TASK_ENV_IDS)
-    assert compose(["task=reach"]).task.cycles_per_epoch == 10
-    assert compose(["task=push"]).task.cycles_per_epoch == 50
+def test_task_files_name_the_tasks_of_the_table_and_take_its_settings():
+    assert group_options("task") == sorted(TASKS)
+    for name, task in TASKS.items():
+        cfg = compose_train([f"task={name}"])
+        assert (cfg.task.name, cfg.task.env_id, cfg.task.cycles_per_epoch) == (name, task.env_id, task.cycles_per_epoch)
+    assert compose_train(["task=reach"]).task.cycles_per_epoch == 10
 
 
 def test_defaults_are_the_papers_appendix_settings():
-    cfg = compose([])
+    cfg = compose_train([])
     d = cfg.ddpg
     assert (d.hidden_layers, d.hidden_units, d.actor_lr, d.critic_lr) == (3, 256, 1e-3, 1e-3)
     assert (d.buffer_size, d.polyak, d.action_l2, d.clip_obs, d.clip_norm, d.norm_eps) == (10**6, 0.95, 1.0, 200, 5, 0.01)
@@ -35,18 +36,70 @@ def test_defaults_are_the_papers_appendix_settings():
     assert (d.random_eps, d.noise_eps, d.gamma) == (0.3, 0.2, None)
     assert (cfg.epochs, cfg.schedule.kind, cfg.schedule.eps, cfg.algo.goal_strategy) == (200, "constant", 0.8, "future")
     assert (cfg.algo.lambda_r, cfg.algo.lambda_h) == (1.0, 1.0)
-    assert compose(["algo=archer"]).algo.lambda_h == 0.5
+    assert compose_train(["algo=archer"]).algo.lambda_h == 0.5
 
 
-def test_every_grid_file_is_a_global_multirun_grid():
-    for path in (CONF_DIR / "grid").glob("*.yaml"):
-        text = path.read_text()
-        assert "# @package _global_" in text.splitlines()[0], path
-        assert "sweeper:" in text and "params:" in text, path
+@pytest.mark.parametrize("preset, kind, beta1, beta2", [
+    ("linear", "linear", 0.25, 0.0), ("paper_linear_025", "linear", 0.25, 0.0), ("paper_linear_100", "linear", 1.0, 0.0),
+    ("exponential", "exponential", 0.25, 0.25), ("paper_exp_050", "exponential", 0.5, 0.5),
+])
+def test_schedule_presets_hold_the_papers_values(preset, kind, beta1, beta2):
+    schedule = compose_train([f"schedule={preset}"]).schedule
+    assert (schedule.kind, schedule.beta1, schedule.beta2) == (kind, beta1, beta2)
+
+
+def test_mep_algos_are_their_base_algo_with_mep_on():
+    for mep, base in (("her_mep", "her"), ("archer_mep", "archer")):
+        with_mep, without = compose_train([f"algo={mep}"]).algo, compose_train([f"algo={base}"]).algo
+        assert with_mep.mep.enabled and not without.mep.enabled
+        assert (with_mep.lambda_r, with_mep.lambda_h) == (without.lambda_r, without.lambda_h)
+
+
+def sweep_config(overrides: list[str]):
+    register_schemas()
+    return compose("sweep", overrides, job_name="test", with_hydra=True)
+
+
+@pytest.mark.parametrize("grid", group_options("grid"))
+def test_every_grid_composes_as_a_multirun_grid(grid):
+    cfg = sweep_config([f"+grid={grid}"])
+    assert cfg.hydra.mode.name == "MULTIRUN" and cfg.hydra.sweeper.params, grid
+
+
+@pytest.mark.parametrize("launcher", [*group_options("hydra/launcher"), "joblib", "submitit_local"])
+def test_every_launcher_composes_with_the_sweep(launcher):
+    cfg = sweep_config(["+grid=smoke", f"hydra/launcher={launcher}"])
+    assert cfg.hydra.launcher._target_.startswith("hydra_plugins.")
+    if launcher == "slurm":
+        assert cfg.hydra.launcher._target_.endswith("SlurmLauncher")
+        assert (cfg.hydra.launcher.cpus_per_task, cfg.hydra.launcher.timeout_min) == (1, 240)
 
 
 def test_mean_rate_solves_beta1_by_eq10():
     from hersd.schedules import mean_rate_exact
 
-    cfg = compose(["schedule=exponential", "schedule.mean_rate=0.85", "schedule.beta2=0.5", "epochs=200"])
+    cfg = compose_train(["schedule=exponential", "schedule.mean_rate=0.85", "schedule.beta2=0.5", "epochs=200"])
     assert mean_rate_exact(cfg.schedule.beta1, 0.5, 200) == pytest.approx(0.85, abs=1e-5)
+
+
+# A schema change must not silently move every run to a new directory: these hashes are the
+# directories of runs made before (results/ and the reproduction campaign hold such runs).
+@pytest.mark.parametrize("overrides, golden", [
+    (["task=push"], "64e236fe"),
+    (["task=push", "schedule=paper_linear_025"], "252651aa"),
+    (["task=push", "schedule=constant_mu_linear_025"], "96c926ed"),
+    (["task=push", "epochs=20", "seed=1", "schedule=paper_exp_050"], "fc3f22b1"),  # results/push/her/exponential-*/seed1-*
+    (["task=reach", "epochs=3"], "620575b7"),
+    (["task=push", "algo=her_mep", "schedule=linear", "epochs=3", "task.cycles_per_epoch=5", "seed=2"], "30f49fa1"),
+])
+def test_golden_config_hash(overrides, golden):
+    assert config_hash(compose_train(overrides)) == golden
+
+
+def test_run_identity_ignores_where_and_how_a_run_is_executed():
+    base = compose_train(["task=push"])
+    for override in ("results_dir=/elsewhere", "quiet=true", "checkpoint_every=5", "keep_checkpoint=true",
+                     "threads=2", "device=cpu"):
+        assert config_hash(compose_train(["task=push", override])) == config_hash(base), override
+    assert not set(NOT_HASHED) & set(hashed_fields(base))
+    assert config_hash(compose_train(["task=push", "seed=1"])) != config_hash(base)

@@ -6,18 +6,21 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import hersd.run_state as run_state_module
 import hersd.train as train_module
+from hersd.compose import compose_train as compose
 from hersd.config import MEPConfig
 from hersd.envs import goal_reward
 from hersd.mep import EpisodePrioritizer, entropy, rank_priorities
 from hersd.replay import Episodes, sample_transitions
-from hersd.runlog import EPOCH_FIELDS, read_run
-from hersd.train import compose, train
+from conftest import TIMING
+from hersd.runlog import read_run
+from hersd.train import train
 
 HORIZON = 50
+# 3 cycles of 4 updates on small networks: enough stored episodes for a mixture fit in epoch 2.
 TINY = ["task=reach", "task.cycles_per_epoch=3", "ddpg.batches_per_cycle=4", "ddpg.test_rollouts=1",
-        "ddpg.batch_size=64", "ddpg.hidden_units=32", "quiet=true"]
-TIMING = [name for name in EPOCH_FIELDS if name.endswith("_seconds")]
+        "ddpg.batch_size=64", "ddpg.hidden_units=32", "quiet=true", "threads=1"]
 
 
 def reward_fn(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -123,7 +126,7 @@ def test_mep_off_leaves_the_training_sampler_untouched(tmp_path, monkeypatch):
         batches.append((batch.episode, batch.t, batch.goal))
         return batch
 
-    monkeypatch.setattr(train_module, "EpisodePrioritizer", no_prioritizer)
+    monkeypatch.setattr(run_state_module, "EpisodePrioritizer", no_prioritizer)
     monkeypatch.setattr(train_module, "sample_transitions", recording_sampler)
     log = read_run(train(compose([*TINY, "epochs=2", f"results_dir={tmp_path}"])))
     assert recorded_probs and all(p is None for p in recorded_probs)

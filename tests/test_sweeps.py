@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from hersd.resources import available_cores
 from hersd.runlog import read_run
+from hersd.runstore import run_lock
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64"]
@@ -79,6 +81,7 @@ def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
         log = read_run(log_path)
         assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4]
         assert log.meta["command"].startswith("hersd-sweep ")
+        assert log.meta["threads"] == max(1, available_cores() // min(available_cores(), 4))  # cores shared out
     assert "4 done" in result.stdout and "0 failed" in result.stdout
     stamps = [p.stat().st_mtime_ns for p in logs]
     again = sweep("+grid=smoke", f"results_dir={tmp_path}")
@@ -117,6 +120,7 @@ def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
     for log_path in logs:
         log = read_run(log_path)
         assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4, 5]  # none lost, none twice
+        assert log.meta["threads"] == available_cores()  # one run at a time: every core
     assert all(path.read_bytes() == data for path, data in finished.items())  # finished runs not re-run
     progress = [json.loads(line)["run_dir"] for p in tmp_path.glob(".sweeps/*/progress.jsonl")
                 for line in p.read_text().splitlines()]
@@ -129,3 +133,14 @@ def test_submitit_local_launcher_runs_the_same_sweep(tmp_path):
                    "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=10", f"results_dir={tmp_path}")
     logs = list(tmp_path.rglob("run.mcap"))
     assert len(logs) == 1 and read_run(logs[0]).complete, result.stdout + result.stderr
+
+
+def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
+    args = ["+grid=smoke", "schedule=constant", "seeds=2", "epochs=1", *TINY, f"results_dir={tmp_path}"]
+    held = Path([r for r in listed_runs(sweep(*args, "--dry-run").stdout) if "/seed0-" in r][0])
+    held.mkdir(parents=True)
+    with run_lock(held):
+        result = sweep(*args, "threads=1")
+    assert "1 done" in result.stdout and "1 running elsewhere" in result.stdout and "0 failed" in result.stdout
+    assert not (held / "run.mcap").exists()
+    assert read_run(next(tmp_path.rglob("seed1-*/run.mcap"))).meta["threads"] == 1  # an explicit count wins

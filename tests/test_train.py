@@ -9,18 +9,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import TINY as TINY_RUN, metrics
 
-from hersd.runlog import EPOCH_FIELDS, read_run
-from hersd.train import compose, main, train
+from hersd.cli import main
+from hersd.compose import compose_train as compose
+from hersd.resources import available_cores
+from hersd.runlog import read_run
+from hersd.runstore import RunLockedError, run_dir, run_lock
+from hersd.train import train
 
-TINY = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
-        "ddpg.batch_size=64", "quiet=true"]
-TIMING = [name for name in EPOCH_FIELDS if name.endswith("_seconds")]
-
-
-def metrics(log_path: Path) -> pd.DataFrame:
-    """Every logged metric except wall-clock timings."""
-    return read_run(log_path).epochs.drop(columns=TIMING)
+TINY = [*TINY_RUN, "quiet=true", "threads=1"]
 
 
 def test_same_seed_gives_identical_metrics(tmp_path):
@@ -45,6 +43,8 @@ def test_log_holds_metadata_and_every_epoch(tmp_path):
                                               "mean_rate": None}
     assert log.meta["command"] == "hersd-train test"
     assert {"python", "torch", "mujoco", "gymnasium_robotics", "hersd"} <= set(log.meta["versions"])
+    assert log.meta["threads"] == 1 and log.meta["device"] == "cpu"
+    assert log.meta["machine"]["cpu_model"] and log.meta["machine"]["torch_cpu_capability"]
     assert log.meta["effective"]["gamma"] == pytest.approx(0.98)
     assert not (log.path.parent / "checkpoint.pt").exists()  # removed once complete
 
@@ -80,7 +80,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_metrics(tmp_path):
 
 def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
-    proc = subprocess.Popen([sys.executable, "-m", "hersd.train", *args], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.cli", *args], stdout=subprocess.PIPE, text=True)
     for line in proc.stdout:
         if line.startswith("epoch") and line.split()[1].startswith("2/"):
             os.kill(proc.pid, signal.SIGKILL)
@@ -90,7 +90,7 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     log_path = next((tmp_path / "cut").rglob("run.mcap"))
     killed = read_run(log_path)
     assert not killed.complete and 2 <= len(killed.epochs) <= 3
-    subprocess.run([sys.executable, "-m", "hersd.train", *args], check=True, capture_output=True)
+    subprocess.run([sys.executable, "-m", "hersd.cli", *args], check=True, capture_output=True)
     reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
     assert read_run(log_path).complete
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
@@ -131,6 +131,26 @@ def test_unreadable_log_without_checkpoint_is_kept_aside_and_the_run_starts_afre
     assert len(kept) == 1 and kept[0].read_bytes() == b"not an mcap file"
 
 
+def test_checkpoint_without_log_is_kept_aside_and_the_run_starts_afresh(tmp_path, capsys):
+    args, directory = _stopped_after_epoch_1(tmp_path)
+    checkpoint_bytes = (directory / "checkpoint.pt").read_bytes()
+    (directory / "run.mcap").unlink()
+    log = read_run(train(compose([*args, "quiet=false"])))
+    assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3] and len(log.sessions) == 1
+    kept = list(directory.glob("checkpoint.orphan-*.pt"))
+    assert len(kept) == 1 and kept[0].read_bytes() == checkpoint_bytes
+    assert "without its log" in capsys.readouterr().out
+
+
+def test_a_locked_run_is_not_run_twice(tmp_path):
+    cfg = compose([*TINY, "epochs=1", f"results_dir={tmp_path}"])
+    run_dir(cfg).mkdir(parents=True)
+    with run_lock(run_dir(cfg)):
+        with pytest.raises(RunLockedError):
+            train(cfg)
+    assert not (run_dir(cfg) / "run.mcap").exists()
+
+
 def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
     log_path = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path}"]))
     data = log_path.read_bytes()
@@ -149,6 +169,21 @@ def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
     ("schedule.beta1=-0.1", "schedule.beta1"),
     ("schedule.beta1=nan", "schedule.beta1"),
     ("schedule.beta2=inf", "schedule.beta2"),
+    ("schedule.beta2=800", "schedule.beta2"),  # exp(800) overflows
+    ("schedule=exponential schedule.mean_rate=0.9 schedule.beta2=-1e308", "schedule.beta2"),
+    ("schedule.mean_rate=0.9", "schedule.mean_rate"),  # only for decaying schedules
+    ("seed=-1", "seed"),
+    ("task.cycles_per_epoch=0", "task.cycles_per_epoch"),
+    ("task.distance_threshold=-1", "task.distance_threshold"),
+    ("algo.lambda_h=0", "algo.lambda_h"),
+    ("algo.mep.temperature=0", "algo.mep.temperature"),
+    ("ddpg.batch_size=0", "ddpg.batch_size"),
+    ("ddpg.gamma=1", "ddpg.gamma"),
+    ("ddpg.polyak=1.5", "ddpg.polyak"),
+    ("threads=0", "threads"),
+    ("threads=many", "threads"),
+    ("device=tpu", "device"),
+    ("device=cuda:x", "device"),
     ("task=cartpole", "task"),
     ("algo.goal_strategy=nearest", "algo.goal_strategy"),
     ("schedule=cosine", "schedule"),
@@ -158,7 +193,7 @@ def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
 ])
 def test_bad_input_is_one_line_naming_the_field_with_exit_2(tmp_path, capsys, override, field):
     with pytest.raises(SystemExit) as exit_info:
-        main([override, f"results_dir={tmp_path}"])
+        main([*override.split(), f"results_dir={tmp_path}"])
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and field in err, err
@@ -209,3 +244,31 @@ def test_log_is_standard_mcap_whose_messages_follow_their_json_schemas(tmp_path)
             jsonschema.validate(json.loads(message.data), json.loads(schema.data))
             topics.append(channel.topic)
     assert topics == ["/run/meta", "/epoch", "/epoch", "/run/status"]
+
+
+def test_device_cpu_and_auto_give_identical_metrics_on_a_cpu_machine(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("device=auto is CUDA on this machine")
+    on_cpu = train(compose([*TINY, "epochs=2", "device=cpu", f"results_dir={tmp_path / 'cpu'}"]))
+    on_auto = train(compose([*TINY, "epochs=2", "device=auto", f"results_dir={tmp_path / 'auto'}"]))
+    pd.testing.assert_frame_equal(metrics(on_cpu), metrics(on_auto))
+    assert read_run(on_auto).meta["device"] == "cpu"
+
+
+def test_threads_auto_gives_a_lone_run_every_core_and_same_threads_same_metrics(tmp_path):
+    args = [*TINY_RUN, "quiet=true", "epochs=1", "threads=auto"]
+    first = train(compose([*args, f"results_dir={tmp_path / 'a'}"]))
+    second = train(compose([*args, f"results_dir={tmp_path / 'b'}"]))
+    assert read_run(first).meta["threads"] == available_cores()
+    assert run_dir(compose([*args, f"results_dir={tmp_path / 'a'}"])) == \
+        run_dir(compose([*TINY, "epochs=1", f"results_dir={tmp_path / 'a'}"]))  # threads: not the run's identity
+    pd.testing.assert_frame_equal(metrics(first), metrics(second))
+
+
+def test_help_is_generated_from_the_schema(capsys):
+    main(["--help"])
+    out = capsys.readouterr().out
+    assert "schedule.beta1=0.0" in out and "eq. 9: final drop of the rate" in out
+    assert "ddpg.polyak=0.95" in out and "threads=auto" in out and "task=pick_and_place|push|reach|slide" in out

@@ -1,0 +1,72 @@
+"""The tree's layers import one way: hersd (one run) <- sweeps (many runs); hersd <- analysis
+(logs to figures). No module imports a layer above it, and no import chain is circular."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+LAYERS = {"hersd": 0, "sweeps": 1, "hydra_plugins": 1, "analysis": 1}  # analysis and sweeps never meet
+MAY_IMPORT = {"hersd": {"hersd"}, "sweeps": {"hersd", "sweeps"}, "hydra_plugins": {"hersd", "sweeps"},
+              "analysis": {"hersd", "analysis"}}
+
+
+def project_imports() -> dict[str, set[str]]:
+    """Module name -> the project modules it imports anywhere in its file (lazy imports included)."""
+    graph: dict[str, set[str]] = {}
+    for package in LAYERS:
+        for path in (ROOT / package).rglob("*.py"):
+            module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+            targets = set()
+            for node in ast.walk(ast.parse(path.read_text())):
+                names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
+                    [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else []
+                targets |= {name for name in names if name.split(".")[0] in LAYERS}
+            graph[module] = targets
+    return graph
+
+
+def test_no_module_imports_a_layer_it_may_not():
+    wrong = [f"{module} imports {target}" for module, targets in project_imports().items() for target in targets
+             if target.split(".")[0] not in MAY_IMPORT[module.split(".")[0]]]
+    assert not wrong, wrong
+
+
+def test_no_import_circle():
+    graph = project_imports()
+    modules = set(graph)
+
+    def resolve(target: str) -> str | None:  # "hersd.config.X" -> the module "hersd.config"
+        while target and target not in modules:
+            target = target.rpartition(".")[0]
+        return target or None
+
+    edges = {m: {resolve(t) for t in targets} - {None, m} for m, targets in graph.items()}
+    state: dict[str, int] = {}
+
+    def visit(module: str, path: list[str]) -> None:
+        state[module] = 1
+        for nxt in sorted(edges[module]):
+            if state.get(nxt) == 1:
+                pytest.fail("import circle: " + " -> ".join(path[path.index(nxt):] + [module, nxt]))
+            if nxt not in state:
+                visit(nxt, path + [module])
+        state[module] = 2
+
+    for module in sorted(edges):
+        if module not in state:
+            visit(module, [])
+
+
+def test_light_modules_import_without_torch_or_mujoco():
+    light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.config",
+             "hersd.schedules", "hersd.tasks", "hersd.resources", "sweeps.launch"]
+    code = (f"import sys; import {', '.join(light)}; "
+            "heavy = [m for m in ('torch', 'mujoco', 'gymnasium_robotics') if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
