@@ -91,28 +91,13 @@ def with_threads(job: list[str], threads: int) -> list[str]:
 # --------------------------------------------------------------------------- in the sweeping process
 def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.core.utils import JobStatus
-
     global _composed
     _composed = True
-    parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
-    overrides = parser.parse_overrides(grid_overrides(sweeper) + list(arguments))
     try:  # the sweep's own settings (e.g. seeds >= 1), before the grid expands them
         sweep_threads = job_train_config(sweeper.config).threads
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
-    jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
-    if not jobs:
-        raise SweepError("the sweep expands to no runs; give each swept key at least one value", exit_code=2)
-
-    planned: dict[Path, list[str]] = {}  # run dir -> overrides; a grid naming a run twice runs it once
-    for job in jobs:
-        job_cfg = sweeper.hydra_context.config_loader.load_sweep_config(sweeper.config, job)
-        try:
-            planned.setdefault(run_dir(job_train_config(job_cfg)), job)
-        except ConfigError as err:
-            raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None
+    planned = plan_runs(sweeper, arguments)
     states = {directory: run_state(directory) for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
@@ -132,16 +117,43 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     sweep_dir.mkdir(parents=True, exist_ok=True)
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
     results = sweeper.launcher.launch(to_launch, initial_job_idx=0)
+    report_outcomes(to_launch, results, skipped=counts["complete"])
+    return [results]
+
+
+def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, list[str]]:
+    """The grid (sweeper params + command line) expanded and checked -> run dir -> its overrides,
+    in grid order; a grid naming a run twice runs it once. An invalid run config stops the sweep."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
+    overrides = parser.parse_overrides(grid_overrides(sweeper) + list(arguments))
+    jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
+    if not jobs:
+        raise SweepError("the sweep expands to no runs; give each swept key at least one value", exit_code=2)
+    planned: dict[Path, list[str]] = {}
+    for job in jobs:
+        job_cfg = sweeper.hydra_context.config_loader.load_sweep_config(sweeper.config, job)
+        try:
+            planned.setdefault(run_dir(job_train_config(job_cfg)), job)
+        except ConfigError as err:
+            raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None
+    return planned
+
+
+def report_outcomes(jobs: list[list[str]], results: list, skipped: int) -> None:
+    """Print how each launched run ended; raise (exit code 1) if any failed."""
+    from hydra.core.utils import JobStatus
 
     outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": []}
-    for job, result in zip(to_launch, results):
+    for job, result in zip(jobs, results):
         if result.status == JobStatus.FAILED:
             outcomes["failed"].append(f"[{' '.join(job)}]: {job_error(result)}")
         else:
             outcome = result.return_value
             detail = outcome["run_dir"] + (f" (see {outcome['error_log']})" if outcome.get("error_log") else "")
             outcomes[outcome["status"]].append(detail)
-    print(f"sweep finished: {len(outcomes['done'])} done, {counts['complete']} skipped (complete), "
+    print(f"sweep finished: {len(outcomes['done'])} done, {skipped} skipped (complete), "
           f"{len(outcomes['resumed'])} resumed, {len(outcomes['busy'])} running elsewhere, "
           f"{len(outcomes['failed'])} failed", flush=True)
     for line in outcomes["failed"]:
@@ -149,7 +161,6 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     if outcomes["failed"]:
         raise SweepError(f"{len(outcomes['failed'])} run(s) failed; fix the cause and run the same command "
                          f"again (finished runs are kept and skipped)", exit_code=1)
-    return [results]
 
 
 # --------------------------------------------------------------------------- in each job process
