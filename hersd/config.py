@@ -102,13 +102,17 @@ class AlgoConfig:
 
 @dataclass
 class ScheduleConfig:
-    kind: str = "constant"  # constant (HER) | linear (eq. 9, beta2 = 0) | exponential (eq. 9)
+    kind: str = "constant"  # constant (HER) | linear (eq. 9, beta2 = 0) | exponential (eq. 9) | success (see below)
     eps: float = 0.8  # the fixed relabel rate of kind=constant (HER: 0.8, i.e. replay_k = 4)
     beta1: float = 0.0  # eq. 9: final drop of the rate, in [0, 1]
     beta2: float = 0.0  # eq. 9: shape, in [-50, 50]; 0 is linear, > 0 concave, < 0 convex
     # If set, beta1 is solved from it: the beta1 whose mean rate over the run's K epochs
     # (eq. 10, exact) equals mean_rate. Used by the iso_mu grid and the search.
     mean_rate: Optional[float] = None
+    # kind=success: eps(k) = clip(1 - beta1 * s(k), eps_min, 1), s(k) = mean train success of the
+    # `window` epochs before k (s(1) = 0), so the rate falls as the agent succeeds (hersd/schedules.py).
+    window: int = 10  # epochs of train success averaged by kind=success
+    eps_min: float = 0.0  # lower bound of the rate of kind=success
 
     def __post_init__(self) -> None:
         _check(self.kind in SCHEDULE_KINDS,
@@ -122,9 +126,12 @@ class ScheduleConfig:
                f"function beyond), got {self.beta2}")
         _check(self.kind != "linear" or self.beta2 == 0.0,
                f"schedule.beta2 must be 0 for schedule=linear (got {self.beta2}); use schedule=exponential")
+        _check(self.window >= 1, f"schedule.window must be >= 1, got {self.window}")
+        _check(_is_finite(self.eps_min) and 0.0 <= self.eps_min <= 1.0,
+               f"schedule.eps_min must be a number in [0, 1], got {self.eps_min}")
         if self.mean_rate is not None:
-            _check(self.kind != "constant", "schedule.mean_rate applies to linear/exponential schedules; "
-                                            "for schedule=constant set schedule.eps")
+            _check(self.kind in ("linear", "exponential"), "schedule.mean_rate applies to linear/exponential "
+                                                          "schedules; for schedule=constant set schedule.eps")
             _check(_is_finite(self.mean_rate) and 0.0 <= self.mean_rate <= 1.0,
                    f"schedule.mean_rate must be a number in [0, 1], got {self.mean_rate}")
 

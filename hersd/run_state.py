@@ -25,7 +25,8 @@ from hersd.replay import EpisodeBuffer
 class RunState:
     """Everything one training run changes as it goes; built from its config alone.
 
-    ``epochs_done`` counts finished epochs; ``env_steps`` and ``updates`` are cumulative.
+    ``epochs_done`` counts finished epochs; ``env_steps`` and ``updates`` are cumulative;
+    ``train_success`` holds each finished epoch's train success (a success schedule's input).
     ``spec`` holds the task's sizes; ``gamma`` and ``q_min`` (the lower clip of target Q,
     -max(lambda_r, lambda_h) / (1 - gamma)) follow from it and the config.
     """
@@ -50,6 +51,7 @@ class RunState:
         # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
         self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
         self.epochs_done = self.env_steps = self.updates = 0
+        self.train_success: list[float] = []
 
     def reward(self, achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """The task's sparse reward for achieved and desired goals (..., goal_dim) -> (...,)."""
@@ -74,7 +76,7 @@ class RunState:
                             for k, v in self.buffer.state_dict().items()},
                  "rng": self.rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
                  "env_rngs": [env.np_random.bit_generator.state for env in self.train_envs + self.test_envs],
-                 "env_steps": self.env_steps, "updates": self.updates}
+                 "env_steps": self.env_steps, "updates": self.updates, "train_success": list(self.train_success)}
         if self.prioritizer is not None:
             state["mep"] = self.prioritizer.state_dict()
         return state
@@ -88,6 +90,7 @@ class RunState:
         for env, env_rng in zip(self.train_envs + self.test_envs, state["env_rngs"]):
             env.np_random.bit_generator.state = env_rng
         self.epochs_done, self.env_steps, self.updates = state["epoch"], state["env_steps"], state["updates"]
+        self.train_success = list(state.get("train_success", []))  # absent from checkpoints of hersd <= 0.1
         if self.prioritizer is not None:
             self.prioritizer.load_state_dict(state["mep"])
 

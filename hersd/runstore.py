@@ -34,7 +34,7 @@ LOCK_NAME = "run.lock"
 NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
-HASHED_UNLESS: dict[str, Any] = {}
+HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0}
 RUN_STATES = ("complete", "resumable", "new")
 
 
@@ -43,9 +43,11 @@ class RunLockedError(RuntimeError):
 
 
 def schedule_tag(schedule: ScheduleConfig) -> str:
-    """e.g. ``constant-0.8``, ``linear-b1_0.25``, ``exponential-b1_0.5-b2_-1``."""
+    """e.g. ``constant-0.8``, ``linear-b1_0.25``, ``exponential-b1_0.5-b2_-1``, ``success-b1_0.5-w10``."""
     if schedule.kind == "constant":
         return f"constant-{schedule.eps:g}"
+    if schedule.kind == "success":
+        return f"success-b1_{schedule.beta1:g}-w{schedule.window}"
     if schedule.kind == "linear":
         return f"linear-b1_{schedule.beta1:g}"
     return f"exponential-b1_{schedule.beta1:g}-b2_{schedule.beta2:g}"

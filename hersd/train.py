@@ -147,7 +147,7 @@ def evaluate(state: RunState) -> np.ndarray:
 def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
     """Epoch k of Algorithm 1 -> its log record."""
     cfg = state.cfg
-    stats = EpochStats(epoch, relabel_rate(cfg.schedule, epoch, cfg.epochs))
+    stats = EpochStats(epoch, relabel_rate(cfg.schedule, epoch, cfg.epochs, state.train_success))
     if state.prioritizer is not None:  # refit the density on the episodes stored so far (none in epoch 1)
         with stats.timed("mep_fit"):
             state.prioritizer.fit(state.buffer.stored().achieved, state.rng)
@@ -158,8 +158,10 @@ def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
             update(state, stats.relabel_rate, stats)
     with stats.timed("eval"):
         test_success = evaluate(state)
+    record = stats.record(state, test_success)
     state.epochs_done = epoch
-    return stats.record(state, test_success)
+    state.train_success.append(record["train_success"])
+    return record
 
 
 # --------------------------------------------------------------------------- the run

@@ -57,3 +57,41 @@ def test_epoch_index_outside_range_is_rejected():
         relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 0, 4)
     with pytest.raises(ValueError):
         relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 5, 4)
+
+
+def test_success_schedule_by_hand():
+    schedule = ScheduleConfig(kind="success", beta1=0.5, window=2, eps_min=0.7)
+    assert relabel_rate(schedule, 1, 10, []) == 1.0  # nothing learnt yet: relabel everything
+    assert relabel_rate(schedule, 2, 10, [0.2]) == pytest.approx(1 - 0.5 * 0.2)
+    assert relabel_rate(schedule, 4, 10, [0.0, 0.2, 0.4]) == pytest.approx(1 - 0.5 * 0.3)  # last 2 epochs
+    assert relabel_rate(schedule, 5, 10, [1.0, 1.0, 1.0, 1.0]) == 0.7  # clipped at eps_min
+    assert np.isnan(schedule_mean_rate(schedule, 10))  # known only from the run's log
+
+
+def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exactly(tmp_path):
+    from conftest import TINY, metrics
+
+    from hersd.compose import compose_train
+    from hersd.runlog import read_run
+    from hersd.train import train
+
+    args = [*TINY, "quiet=true", "threads=1", "epochs=4", "schedule=success", "schedule.beta1=0.9",
+            "schedule.window=2"]
+    reference = read_run(train(compose_train([*args, f"results_dir={tmp_path / 'ref'}"]))).epochs
+    success = reference["train_success"].tolist()
+    schedule = compose_train(args).schedule
+    expected = [relabel_rate(schedule, k, 4, success[:k - 1]) for k in range(1, 5)]
+    assert reference["relabel_rate"].tolist() == expected and expected[0] == 1.0
+
+    class Stop(Exception):
+        pass
+
+    def stop_after_2(record):
+        if record["epoch"] == 2:
+            raise Stop
+
+    cut = compose_train([*args, f"results_dir={tmp_path / 'cut'}"])
+    with pytest.raises(Stop):
+        train(cut, on_epoch=stop_after_2)
+    resumed = train(cut)
+    assert metrics(resumed).equals(reference.drop(columns=[c for c in reference if c.endswith("_seconds")]))
