@@ -40,7 +40,7 @@ def test_log_holds_metadata_and_every_epoch(tmp_path):
     assert list(log.epochs["env_steps"]) == [200, 400, 600]  # 2 cycles x 2 episodes x 50 steps
     assert list(log.epochs["updates"]) == [10, 20, 30]
     assert log.meta["config"]["schedule"] == {"kind": "linear", "eps": 0.8, "beta1": 0.5, "beta2": 0.0,
-                                              "mean_rate": None}
+                                              "mean_rate": None, "window": 10, "eps_min": 0.0}
     assert log.meta["command"] == "hersd-train test"
     assert {"python", "torch", "mujoco", "gymnasium_robotics", "hersd"} <= set(log.meta["versions"])
     assert log.meta["threads"] == 1 and log.meta["device"] == "cpu"
