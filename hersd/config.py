@@ -18,7 +18,7 @@ from typing import Optional
 from omegaconf import DictConfig, OmegaConf
 
 from hersd.schedules import BETA2_LIMIT, SCHEDULE_KINDS, beta1_for_mean_rate
-from hersd.tasks import TASKS
+from hersd.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
@@ -39,18 +39,23 @@ def _is_finite(value: float) -> bool:
 
 @dataclass
 class TaskConfig:
-    name: str = "push"  # short task name: a key of hersd.tasks.TASKS (reach | push | pick_and_place | slide)
-    env_id: Optional[str] = None  # gymnasium-robotics environment id; null: the task's (hersd/tasks.py)
-    cycles_per_epoch: Optional[int] = None  # rollout+update cycles per epoch; null: the paper's (50; FetchReach 10)
+    name: str = "push"  # a task of hersd/tasks.py (reach, push, ... hand_block), or custom (with task.env_id)
+    env_id: Optional[str] = None  # gymnasium-robotics env id; null: the task's; task=custom: any goal-conditioned env
+    cycles_per_epoch: Optional[int] = None  # rollout+update cycles per epoch; null: the task's (50; FetchReach 10)
     # Success radius in metres; null keeps the env's own (0.05 m for every v4 Fetch task).
     # The paper's text states 0.07 m (Push, PickAndPlace) and 0.20 m (Slide).
     distance_threshold: Optional[float] = None
 
     def __post_init__(self) -> None:
-        _check(self.name in TASKS, f"task={self.name!r} is not a known task; choose one of: {', '.join(TASKS)}")
-        task = TASKS[self.name]
-        _check(self.env_id in (None, task.env_id),
-               f"task.env_id={self.env_id!r} does not match task={self.name!r} (expected {task.env_id!r})")
+        if self.name == CUSTOM:
+            _check(bool(self.env_id), "task=custom needs task.env_id=<a goal-conditioned gymnasium-robotics env id>")
+        else:
+            _check(self.name in TASKS or (self.env_id and self.name == self.env_id),  # a resolved custom task
+                   f"task={self.name!r} is not a known task; choose one of: {', '.join([*TASKS, CUSTOM])}")
+            expected = TASKS[self.name].env_id if self.name in TASKS else self.name
+            _check(self.env_id in (None, expected),
+                   f"task.env_id={self.env_id!r} does not match task={self.name!r} ({expected}); "
+                   f"for another env use task=custom task.env_id={self.env_id}")
         _check(self.cycles_per_epoch is None or self.cycles_per_epoch >= 1,
                f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
         if self.distance_threshold is not None:
@@ -58,11 +63,15 @@ class TaskConfig:
                    f"task.distance_threshold must be a positive number of metres or null, got {self.distance_threshold}")
 
     def resolve(self) -> None:
-        """Fill the null env_id and cycles_per_epoch from the task table (by the training config,
-        not here: the schema's own default instance must stay unresolved)."""
-        task = TASKS[self.name]
-        self.env_id = self.env_id or task.env_id
-        self.cycles_per_epoch = self.cycles_per_epoch or task.cycles_per_epoch
+        """Fill the null env_id and cycles_per_epoch from the task table; a custom task takes its
+        env id as its name (by the training config, not here: the schema's own default instance
+        must stay unresolved)."""
+        if self.name in TASKS:
+            self.env_id = self.env_id or TASKS[self.name].env_id
+            self.cycles_per_epoch = self.cycles_per_epoch or TASKS[self.name].cycles_per_epoch
+        else:
+            self.name = self.env_id
+            self.cycles_per_epoch = self.cycles_per_epoch or CUSTOM_CYCLES_PER_EPOCH
 
 
 @dataclass

@@ -2,7 +2,9 @@
 report (order and titles).
 
 A task is a gymnasium-robotics goal-conditioned env; ``cycles_per_epoch`` is the paper's
-epoch size for it (50 cycles; FetchReach 10, as in the reference HER code).
+epoch size for it (50 cycles; FetchReach 10, as in the reference HER code). The Fetch tasks
+are the paper's; the Hand tasks go beyond it. ``task=custom task.env_id=<id>`` runs any other
+goal-conditioned env (its run directories and reports are named by its env id).
 """
 
 from __future__ import annotations
@@ -22,7 +24,11 @@ TASKS: dict[str, Task] = {task.name: task for task in (  # in the paper's order
     Task("push", "FetchPush-v4", "FetchPush", 50),
     Task("pick_and_place", "FetchPickAndPlace-v4", "FetchPickAndPlace", 50),
     Task("slide", "FetchSlide-v4", "FetchSlide", 50),
+    Task("hand_reach", "HandReach-v3", "HandReach", 50),
+    Task("hand_block", "HandManipulateBlockRotateXYZ-v1", "HandManipulateBlockRotateXYZ", 50),
 )}
+CUSTOM = "custom"  # task=custom task.env_id=<any goal-conditioned env id>
+CUSTOM_CYCLES_PER_EPOCH = 50
 
 
 def task_rank(name: str) -> tuple[int, str]:

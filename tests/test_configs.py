@@ -7,7 +7,7 @@ import pytest
 from hersd.compose import compose, compose_train, group_options
 from hersd.config import TrainConfig
 from hersd.runstore import NOT_HASHED, config_hash, hashed_fields
-from hersd.tasks import TASKS
+from hersd.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
 
@@ -15,12 +15,13 @@ from sweeps.launch import register_schemas
 def test_every_group_option_composes(group):
     assert group_options(group)
     for option in group_options(group):
-        cfg = compose_train([f"{group}={option}"])
+        extra = ["task.env_id=HandManipulateEgg-v1"] if option == CUSTOM else []
+        cfg = compose_train([f"{group}={option}", *extra])
         assert isinstance(cfg, TrainConfig)
 
 
 def test_task_files_name_the_tasks_of_the_table_and_take_its_settings():
-    assert group_options("task") == sorted(TASKS)
+    assert group_options("task") == sorted([*TASKS, CUSTOM])
     for name, task in TASKS.items():
         cfg = compose_train([f"task={name}"])
         assert (cfg.task.name, cfg.task.env_id, cfg.task.cycles_per_epoch) == (name, task.env_id, task.cycles_per_epoch)
@@ -103,3 +104,9 @@ def test_run_identity_ignores_where_and_how_a_run_is_executed():
         assert config_hash(compose_train(["task=push", override])) == config_hash(base), override
     assert not set(NOT_HASHED) & set(hashed_fields(base))
     assert config_hash(compose_train(["task=push", "seed=1"])) != config_hash(base)
+
+
+def test_a_custom_task_is_named_by_its_env_id():
+    cfg = compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"])
+    assert (cfg.task.name, cfg.task.env_id, cfg.task.cycles_per_epoch) == ("HandManipulateEgg-v1",) * 2 + (50,)
+    assert config_hash(cfg) == config_hash(compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"]))
