@@ -11,6 +11,7 @@ import dataclasses
 import inspect
 import re
 import sys
+from pathlib import Path
 from typing import Any
 
 from hersd.compose import compose_train, explain_config_error, group_options
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     try:
         cfg = compose_train(argv)
-        check_writable(run_dir(cfg))
+        check_writable(run_dir(cfg).parent if cfg.run_dir is not None else Path(cfg.results_dir))
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
@@ -98,8 +99,6 @@ def main(argv: list[str] | None = None) -> None:
         _fail(f"{err}; wait for it to finish")
     except RunStateError as err:
         _fail(str(err))
-    except MemoryError:
-        _fail("not enough memory for this run's replay buffer or networks; lower ddpg.buffer_size or ddpg.hidden_units")
     print(log_path)
 
 

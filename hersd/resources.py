@@ -29,6 +29,17 @@ def resolve_threads(threads: str, concurrent_runs: int = 1) -> int:
     return int(threads)
 
 
+def available_memory_bytes() -> int | None:
+    """Memory this machine can still give (Linux ``MemAvailable``); None where unknown."""
+    meminfo = Path("/proc/meminfo")
+    if not meminfo.exists():
+        return None
+    for line in meminfo.read_text().splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) * 1024
+    return None
+
+
 def resolve_device(device: str) -> Any:
     """``auto`` -> cuda if available else cpu; ``cuda[:N]`` must be available (else ConfigError)."""
     import torch

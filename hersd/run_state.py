@@ -15,11 +15,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from hersd.config import TrainConfig
+from hersd.config import ConfigError, TrainConfig
 from hersd.ddpg import DDPG
-from hersd.envs import env_spec, goal_reward, make_env
+from hersd.envs import EnvSpec, env_spec, goal_reward, make_env
 from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer
+from hersd.resources import available_memory_bytes
 
 
 class RunState:
@@ -43,6 +44,7 @@ class RunState:
             for env, env_seed in zip(envs, seq.generate_state(len(envs))):
                 env.reset(seed=int(env_seed))
         self.spec = spec = env_spec(self.train_envs[0])
+        check_memory(cfg, spec)
         self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
         self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
         self.agent = DDPG(d, spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, self.gamma,
@@ -97,6 +99,26 @@ class RunState:
     def close(self) -> None:
         for env in self.train_envs + self.test_envs:
             env.close()
+
+
+def memory_needed(cfg: TrainConfig, spec: EnvSpec) -> int:
+    """Bytes of a run's replay buffer and networks (online, target, gradients, two Adam moments)."""
+    d, horizon = cfg.ddpg, spec.horizon
+    episode_floats = (horizon + 1) * (spec.obs_dim + spec.goal_dim) + horizon * (spec.goal_dim + spec.action_dim)
+    buffer = max(1, d.buffer_size // horizon) * episode_floats * 4
+    in_dim, units = spec.obs_dim + spec.goal_dim, d.hidden_units
+    hidden = (d.hidden_layers - 1) * (units * units + units)
+    actor = in_dim * units + units + hidden + units * spec.action_dim + spec.action_dim
+    critic = (in_dim + spec.action_dim) * units + units + hidden + units + 1
+    return buffer + (actor + critic) * 4 * 5
+
+
+def check_memory(cfg: TrainConfig, spec: EnvSpec) -> None:
+    """ConfigError (one line) when the run cannot fit in this machine's available memory."""
+    needed, available = memory_needed(cfg, spec), available_memory_bytes()
+    if available is not None and needed > available:
+        raise ConfigError(f"this run needs {needed / 2**30:.1f} GiB for its replay buffer and networks but "
+                          f"{available / 2**30:.1f} GiB are available; lower ddpg.buffer_size or ddpg.hidden_units")
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:

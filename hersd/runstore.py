@@ -102,6 +102,18 @@ def run_lock(directory: Path) -> Iterator[None]:
         yield
 
 
+def remove_if_unused(directory: Path, up_to: Path) -> None:
+    """Remove a run directory that holds nothing but its lock file (a run that failed at start),
+    then its parents while empty, up to (not including) ``up_to``."""
+    if not directory.is_dir() or {p.name for p in directory.iterdir()} - {LOCK_NAME}:
+        return
+    (directory / LOCK_NAME).unlink(missing_ok=True)
+    up_to = up_to.resolve()
+    while directory.resolve() != up_to and directory.resolve().is_relative_to(up_to) and not any(directory.iterdir()):
+        directory.rmdir()
+        directory = directory.parent
+
+
 def keep_aside(path: Path, why: str) -> Path:
     """Rename ``run.mcap`` to ``run.<why>-<time>.mcap`` (any file likewise) next to it; returns the new path."""
     kept = path.with_name(f"{path.name.split('.')[0]}.{why}-{time.strftime('%Y%m%d-%H%M%S')}{path.suffix}")

@@ -27,7 +27,7 @@ from hersd.replay import Episodes, TransitionBatch, sample_transitions
 from hersd.resources import machine_info, resolve_device, resolve_threads
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_run
-from hersd.runstore import CHECKPOINT_NAME, config_hash, keep_aside, run_dir, run_lock
+from hersd.runstore import CHECKPOINT_NAME, config_hash, keep_aside, remove_if_unused, run_dir, run_lock
 from hersd.schedules import relabel_rate
 
 EpochCallback = Callable[[dict], None]
@@ -172,7 +172,18 @@ def train(cfg: TrainConfig, command: str = "", on_epoch: EpochCallback | None = 
     an exception it raises stops the run there, leaving it resumable.
     """
     directory = run_dir(cfg)
+    created = not directory.exists()
     directory.mkdir(parents=True, exist_ok=True)
+    try:
+        return _train_in(directory, cfg, command, on_epoch)
+    except BaseException:
+        if created:  # failed before writing anything (e.g. too little memory): leave no empty folders
+            remove_if_unused(directory, up_to=Path(cfg.results_dir))
+        raise
+
+
+def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCallback | None) -> Path:
+    """:func:`train` in its run directory, under the run's lock."""
     log_path, checkpoint_path = directory / LOG_NAME, directory / CHECKPOINT_NAME
     with run_lock(directory):
         previous = _read_previous_log(cfg, log_path, checkpoint_path)

@@ -184,6 +184,10 @@ def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
     ("threads=many", "threads"),
     ("device=tpu", "device"),
     ("device=cuda:x", "device"),
+    ("ddpg.buffer_size=100000000000", "ddpg.buffer_size"),  # more memory than any machine here has
+    ("ddpg.hidden_units=200000", "ddpg.hidden_units"),
+    ("task=custom", "task.env_id"),
+    ("task.env_id=HandReach-v3", "task=custom"),
     ("task=cartpole", "task"),
     ("algo.goal_strategy=nearest", "algo.goal_strategy"),
     ("schedule=cosine", "schedule"),
@@ -271,4 +275,4 @@ def test_help_is_generated_from_the_schema(capsys):
     main(["--help"])
     out = capsys.readouterr().out
     assert "schedule.beta1=0.0" in out and "eq. 9: final drop of the rate" in out
-    assert "ddpg.polyak=0.95" in out and "threads=auto" in out and "task=pick_and_place|push|reach|slide" in out
+    assert "ddpg.polyak=0.95" in out and "threads=auto" in out and "task=custom|hand_block|hand_reach|pick_and_place|push|reach|slide" in out
