@@ -18,7 +18,7 @@ from hersd.compose import compose_train, explain_config_error, group_options
 from hersd.config import ConfigError, TrainConfig
 from hersd.runstore import RunLockedError, check_writable, run_dir
 
-GROUPS = ("task", "algo", "schedule")  # config groups a run selects (conf/<group>/*.yaml)
+GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
 _FIELD_LINE = re.compile(r"^\s+(\w+):[^=]+=.*?(?:#\s*(.*))?$")
 
 

@@ -22,6 +22,7 @@ from hersd.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
+LEARNERS = ("ddpg", "td3", "sac")
 
 
 class ConfigError(ValueError):
@@ -192,11 +193,54 @@ class DDPGConfig:
 
 
 @dataclass
+class TD3Config:
+    # TD3 (Fujimoto et al. 2018): twin critics (the target takes their minimum), target policy smoothing.
+    policy_noise: float = 0.2  # std of the Gaussian noise on target actions, as a share of max action
+    noise_clip: float = 0.5  # that noise is clipped to +-noise_clip (share of max action)
+    policy_delay: int = 2  # the actor steps once per policy_delay critic steps
+
+    def __post_init__(self) -> None:
+        for name in ("policy_noise", "noise_clip"):
+            value = getattr(self, name)
+            _check(_is_finite(value) and value >= 0, f"learner.td3.{name} must be a number >= 0, got {value}")
+        _check(self.policy_delay >= 1, f"learner.td3.policy_delay must be >= 1, got {self.policy_delay}")
+
+
+@dataclass
+class SACConfig:
+    # SAC (Haarnoja et al. 2018, automatic temperature): squashed Gaussian policy, twin critics.
+    init_alpha: float = 1.0  # initial entropy temperature alpha (log alpha starts at 0, as in the authors' code)
+    alpha_lr: float = 3e-4  # Adam learning rate of log(alpha) (the SAC paper's 3e-4)
+    target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
+
+    def __post_init__(self) -> None:
+        for name in ("init_alpha", "alpha_lr"):
+            value = getattr(self, name)
+            _check(_is_finite(value) and value > 0, f"learner.sac.{name} must be a positive number, got {value}")
+        if self.target_entropy is not None:
+            _check(_is_finite(self.target_entropy),
+                   f"learner.sac.target_entropy must be a finite number or null, got {self.target_entropy}")
+
+
+@dataclass
+class LearnerConfig:
+    # The off-policy learner; all share ddpg.* (networks, optimiser, batch, gamma, polyak once
+    # per cycle, normalisation, target clipping) and every other part of a run.
+    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac
+    td3: TD3Config = field(default_factory=TD3Config)
+    sac: SACConfig = field(default_factory=SACConfig)
+
+    def __post_init__(self) -> None:
+        _check(self.name in LEARNERS, f"learner={self.name!r} is unknown; choose one of: {', '.join(LEARNERS)}")
+
+
+@dataclass
 class TrainConfig:
     task: TaskConfig = field(default_factory=TaskConfig)
     algo: AlgoConfig = field(default_factory=AlgoConfig)
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
     seed: int = 0  # one seed, one result (every RNG is derived from it)
     epochs: int = 200  # K in eq. 9 (the paper trains 200 epochs)
     results_dir: str = "results"  # run directories are created below this folder

@@ -47,8 +47,7 @@ class RunState:
         check_memory(cfg, spec)
         self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
         self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
-        self.agent = DDPG(d, spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, self.gamma,
-                          self.q_min, device)
+        self.agent = make_agent(cfg, spec, self.gamma, self.q_min, device)
         self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
         # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
         self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
@@ -99,6 +98,20 @@ class RunState:
     def close(self) -> None:
         for env in self.train_envs + self.test_envs:
             env.close()
+
+
+def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_min: float, device: torch.device) -> DDPG:
+    """The learner of ``cfg.learner.name``; every learner has DDPG's interface (act, update, update_targets, ...)."""
+    sizes = (spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_min, device)
+    if cfg.learner.name == "td3":
+        from hersd.td3 import TD3
+
+        return TD3(cfg.ddpg, cfg.learner.td3, *sizes)
+    if cfg.learner.name == "sac":
+        from hersd.sac import SAC
+
+        return SAC(cfg.ddpg, cfg.learner.sac, *sizes)
+    return DDPG(cfg.ddpg, *sizes)
 
 
 def memory_needed(cfg: TrainConfig, spec: EnvSpec) -> int:

@@ -1,7 +1,7 @@
 """The run store: where a run lives and what state it is in, shared by training, sweeps and
 the search. Light (no torch): a sweep plans hundreds of runs with it.
 
-``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` holds
+``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` (``<learner>-<algo>`` for td3 and sac) holds
 
 - ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
 - ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
@@ -54,8 +54,13 @@ def schedule_tag(schedule: ScheduleConfig) -> str:
 
 
 def hashed_fields(cfg: TrainConfig) -> dict[str, Any]:
-    """The config as a nested dict, less :data:`NOT_HASHED` and the :data:`HASHED_UNLESS` defaults."""
+    """The config as a nested dict, less :data:`NOT_HASHED` and the :data:`HASHED_UNLESS` defaults;
+    of ``learner`` only the learner in use and its own settings, and nothing for ddpg (the
+    learner of every run made before learners were a setting)."""
     content = {k: v for k, v in asdict(cfg).items() if k not in NOT_HASHED}
+    learner = content.pop("learner")
+    if learner["name"] != "ddpg":
+        content["learner"] = {"name": learner["name"], learner["name"]: learner[learner["name"]]}
     for dotted, earlier_value in HASHED_UNLESS.items():
         *parents, leaf = dotted.split(".")
         node = content
@@ -75,8 +80,8 @@ def run_dir(cfg: TrainConfig) -> Path:
     """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
     if cfg.run_dir is not None:
         return Path(cfg.run_dir)
-    return (Path(cfg.results_dir) / cfg.task.name / cfg.algo.name / schedule_tag(cfg.schedule)
-            / f"seed{cfg.seed}-{config_hash(cfg)}")
+    algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{cfg.learner.name}-{cfg.algo.name}"
+    return Path(cfg.results_dir) / cfg.task.name / algo / schedule_tag(cfg.schedule) / f"seed{cfg.seed}-{config_hash(cfg)}"
 
 
 def run_state(directory: Path) -> str:

@@ -224,6 +224,7 @@ def main() -> None:
 def choices_line() -> str:
     """One line listing the grid/task/algo/schedule options and the top-level keys."""
     groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(group_options(group))}"
-              for group in ("grid", "task", "algo", "schedule")]
-    keys = [f.name for f in fields(SweepConfig) if f.name not in ("task", "algo", "schedule", "ddpg")]
-    return "  ".join(groups) + f"  keys: {', '.join(keys)}, task.*, algo.*, schedule.*, ddpg.*"
+              for group in ("grid", "task", "algo", "schedule", "learner")]
+    nested = ("task", "algo", "schedule", "ddpg", "learner")
+    keys = [f.name for f in fields(SweepConfig) if f.name not in nested]
+    return "  ".join(groups) + f"  keys: {', '.join(keys)}, " + ", ".join(f"{name}.*" for name in nested)

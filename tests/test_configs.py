@@ -11,7 +11,7 @@ from hersd.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
 
-@pytest.mark.parametrize("group", ["task", "algo", "schedule"])
+@pytest.mark.parametrize("group", ["task", "algo", "schedule", "learner"])
 def test_every_group_option_composes(group):
     assert group_options(group)
     for option in group_options(group):
@@ -110,3 +110,12 @@ def test_a_custom_task_is_named_by_its_env_id():
     cfg = compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"])
     assert (cfg.task.name, cfg.task.env_id, cfg.task.cycles_per_epoch) == ("HandManipulateEgg-v1",) * 2 + (50,)
     assert config_hash(cfg) == config_hash(compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"]))
+
+
+def test_only_the_learner_in_use_is_part_of_a_runs_identity():
+    ddpg = compose_train(["task=push"])
+    assert config_hash(compose_train(["task=push", "learner.td3.policy_delay=3"])) == config_hash(ddpg)
+    td3 = compose_train(["task=push", "learner=td3"])
+    assert config_hash(td3) != config_hash(ddpg)
+    assert config_hash(compose_train(["task=push", "learner=td3", "learner.sac.alpha_lr=0.1"])) == config_hash(td3)
+    assert config_hash(compose_train(["task=push", "learner=td3", "learner.td3.policy_delay=3"])) != config_hash(td3)
