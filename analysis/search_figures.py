@@ -9,12 +9,15 @@
 - ``<study>_best_trials.csv`` / ``.md``: the best complete trials, with mu_eps exact over
   the study's epochs (eq. 10) and by eq. 11, and their run directories.
 
-:func:`study_figures` draws these for every study in a storage (or one). Needs optuna,
-pandas and matplotlib, not torch or MuJoCo.
+:func:`study_figures` draws these for every study in a storage (or one), opened read-only
+by :func:`open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR [--study
+NAME]`` does the same from the command line (``hersd-search`` runs it). Needs optuna, pandas
+and matplotlib, not torch or MuJoCo.
 """
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -31,10 +34,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
-from hersd.schedules import mean_rate_approx  # noqa: E402
-from sweeps.search import mean_rates, open_storage  # noqa: E402
-
-MU_EPS_BAND = (0.8, 0.889)  # the HER paper's two best fixed rates; the seed paper's target for mu_eps
+from hersd.schedules import MU_EPS_BAND, mean_rate_approx, schedule_mean_rates  # noqa: E402
 ISO_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.889, 0.95)
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
 SCHEDULE_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
@@ -69,7 +69,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
                "run_dirs": ";".join(trial.user_attrs.get("run_dirs", []))}
         if kind is not None and set(SCHEDULE_PARAMS[kind]) <= set(params):
-            exact, approx = mean_rates({**params, "kind": kind}, epochs or 1)
+            exact, approx = _mean_rates({**params, "kind": kind}, epochs or 1)
             row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
                        in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])
         rows.append(row)
@@ -174,7 +174,7 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a SQLAlchemy
     URL, or ``journal:<path>``.
     """
-    storage = open_storage(str(storage_url_or_db_path), create=False)
+    storage = open_study_storage(str(storage_url_or_db_path))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     names = [study_name] if study_name is not None else sorted(optuna.get_all_study_names(storage))
@@ -198,3 +198,61 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
                            + ("" if len(best) else "\n(no complete trials yet)\n"))
         written += [figure_path, csv_path, md_path]
     return written
+
+
+def _mean_rates(params: dict, epochs: int) -> tuple[float, float]:
+    """mu_eps of a trial's schedule parameters: exact over the study's epochs (eq. 10) and by eq. 11."""
+    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
+
+
+class StudyStorageError(ValueError):
+    """A study storage cannot be opened; the message is one line for the user."""
+
+
+def open_study_storage(spec: str) -> optuna.storages.BaseStorage:
+    """Open an Optuna storage to read its studies: a SQLite file (``*.db``), a journal file
+    (``*.log``, ``*.journal`` or ``journal:<path>``) or a SQLAlchemy URL (e.g. ``postgresql://...``).
+    Nothing is created: a missing file or an unreachable database raises :class:`StudyStorageError`."""
+    from optuna.storages import JournalStorage, RDBStorage
+    from optuna.storages.journal import JournalFileBackend
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+
+    if "://" not in spec:
+        path = Path(spec.removeprefix("journal:")).expanduser()
+        if not path.is_file():
+            raise StudyStorageError(f"{path}: no such study storage")
+        if spec.startswith("journal:") or path.suffix in (".log", ".journal"):
+            return JournalStorage(JournalFileBackend(str(path)))
+        spec = f"sqlite:///{path.resolve()}"
+    try:
+        return RDBStorage(spec, skip_table_creation=True)
+    except (NoSuchModuleError, ArgumentError) as err:
+        raise StudyStorageError(f"{spec}: not a storage URL ({' '.join(str(err).split())[:160]})") from None
+    except ImportError as err:
+        raise StudyStorageError(f"the database driver is missing ({err.name or err}); for PostgreSQL "
+                                f'pip install "hersd[cluster]"') from None
+    except OperationalError as err:
+        raise StudyStorageError(f"cannot reach the database at {spec.split('@')[-1]} "
+                                f"({' '.join(str(err.orig or err).split())[:160]})") from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m analysis.search_figures STORAGE OUT_DIR [--study NAME]``: draw, print the files."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m analysis.search_figures", description=study_figures.__doc__)
+    parser.add_argument("storage")
+    parser.add_argument("out_dir")
+    parser.add_argument("--study", default=None)
+    args = parser.parse_args(argv)
+    try:
+        paths = study_figures(args.storage, args.out_dir, study_name=args.study)
+    except StudyStorageError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print("\n".join(str(path) for path in paths))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

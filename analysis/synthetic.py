@@ -14,7 +14,7 @@ import numpy as np
 
 from hersd.config import TrainConfig
 from hersd.runlog import LOG_NAME, RunLogWriter
-from hersd.runs import config_hash
+from hersd.runstore import config_hash
 from hersd.schedules import relabel_rate
 
 

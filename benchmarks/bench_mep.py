@@ -31,13 +31,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from hersd.compose import compose_train as compose
 from hersd.envs import make_env
-from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer, Episodes
+from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import read_run
-from hersd.train import CHECKPOINT_NAME, compose, train
+from hersd.runstore import CHECKPOINT_NAME
+from hersd.train import train
 
-BASE = ["task=push", "seed=0", "epochs=2", "quiet=true", "keep_checkpoint=true"]
+BASE = ["task=push", "seed=0", "epochs=2", "quiet=true", "keep_checkpoint=true", "threads=1"]
 EPISODES_PER_EPOCH = 100  # 50 cycles x 2 rollouts
 
 
@@ -78,18 +80,16 @@ def prefilled_start(directory: Path, prefill: Episodes, mep: bool) -> None:
     except StopAfterFirstEpoch:
         pass
     path = directory / CHECKPOINT_NAME
-    checkpoint = torch.load(path, weights_only=False)
+    state = RunState(cfg)
+    state.load_state_dict(load_checkpoint(path, torch.device("cpu")))
     n, horizon = prefill.goal.shape[:2]
-    buffer = EpisodeBuffer(cfg.ddpg.buffer_size, horizon, prefill.obs.shape[-1], 3, prefill.action.shape[-1])
-    buffer.store(prefill)
-    checkpoint["buffer"] = {k: torch.from_numpy(v) if isinstance(v, np.ndarray) else v
-                            for k, v in buffer.state_dict().items()}
+    state.buffer = EpisodeBuffer(cfg.ddpg.buffer_size, horizon, prefill.obs.shape[-1], 3, prefill.action.shape[-1])
+    state.buffer.store(prefill)
     if mep:
-        prioritizer = EpisodePrioritizer(cfg.algo.mep, buffer.capacity)
-        prioritizer.fit(prefill.achieved[:n - EPISODES_PER_EPOCH], np.random.default_rng(0))
-        prioritizer.score_new(np.arange(n - EPISODES_PER_EPOCH, n), prefill.achieved[n - EPISODES_PER_EPOCH:])
-        checkpoint["mep"] = prioritizer.state_dict()
-    torch.save(checkpoint, path)
+        state.prioritizer.fit(prefill.achieved[:n - EPISODES_PER_EPOCH], np.random.default_rng(0))
+        state.prioritizer.score_new(np.arange(n - EPISODES_PER_EPOCH, n), prefill.achieved[n - EPISODES_PER_EPOCH:])
+    save_checkpoint(path, state.state_dict())
+    state.close()
 
 
 def timed_epoch(start: Path, work: Path, mep: bool) -> dict:

@@ -23,8 +23,8 @@ from unittest import mock
 import numpy as np
 
 from analysis.synthetic import write_run
-from hersd.config import TASK_ENV_IDS, AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
-from hersd.runs import run_dir
+from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.runstore import run_dir
 from hersd.schedules import schedule_mean_rate
 
 BUDGET_SECONDS = 15.0
@@ -77,7 +77,7 @@ def _write_logs(folder: Path) -> int:
     for task, difficulty in TASK_DIFFICULTY.items():
         for algo, schedule in configurations():
             for seed in range(SEEDS):
-                config = TrainConfig(task=TaskConfig(name=task, env_id=TASK_ENV_IDS[task]), algo=algo,
+                config = TrainConfig(task=TaskConfig(name=task), algo=algo,
                                      schedule=schedule, seed=seed, epochs=EPOCHS, results_dir=str(folder))
                 curve = success_curve(rng, difficulty, schedule_mean_rate(schedule, EPOCHS), EPOCHS)
                 write_run(run_dir(config), config, curve)

@@ -48,8 +48,9 @@ from optuna.trial import TrialState
 
 from hersd.config import SCHEDULE_KINDS, ConfigError, ScheduleConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, read_run
-from hersd.runs import config_hash, run_dir
-from hersd.schedules import mean_rate_approx, mean_rate_exact
+from hersd.runstore import config_hash, run_dir
+from hersd.compose import compose, compose_train, explain_config_error, group_options, register_schema as store_schema
+from hersd.schedules import schedule_mean_rates
 
 JOURNAL_PREFIX = "journal:"
 SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing
@@ -60,7 +61,7 @@ LAUNCHERS = ("local", "slurm")
 METRICS = tuple(name for name, (kind, _) in EPOCH_FIELDS.items()
                 if kind == "number" and name not in OPTIONAL_EPOCH_FIELDS)
 PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")
-SLURM_PRESET = Path("hydra") / "launcher" / "slurm.yaml"  # hersd-sweep's SLURM settings, below the conf dir
+SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, inside the hersd.conf package
 SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
 
 
@@ -182,9 +183,7 @@ def register_schema() -> None:
     """Register :class:`SearchConfig` as ``search/search_schema``, which every ``conf/search`` file
     lists first in its defaults: files then hold only their differences, and unknown keys or
     wrong types fail at composition."""
-    from hydra.core.config_store import ConfigStore
-
-    ConfigStore.instance().store(group="search", name="search_schema", node=SearchConfig)
+    store_schema("search_schema", SearchConfig, group="search")
 
 
 def compose_search(overrides: list[str]) -> SearchConfig:
@@ -192,18 +191,14 @@ def compose_search(overrides: list[str]) -> SearchConfig:
 
     ``overrides`` are Hydra overrides with the group selected as ``+search=<name>``.
     """
-    from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException, MissingConfigException
     from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
 
-    from hersd.train import CONF_DIR, explain_config_error
-
     register_schema()
     try:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3", job_name="hersd-search"):
-            composed = compose(config_name=None, overrides=overrides)
+        composed = compose(None, overrides, job_name="hersd-search")
     except MissingConfigException as err:
-        choices = sorted(path.stem for path in (CONF_DIR / "search").glob("*.yaml"))
+        choices = group_options("search")
         name = (err.missing_cfg_file or "").partition("/")[2] or "?"
         raise ConfigError(f"search={name} is not a known search; choose one of: {', '.join(choices)}") from None
     except HydraException as err:
@@ -275,7 +270,26 @@ def open_storage(spec: str, create: bool = True) -> BaseStorage:
         return JournalStorage(JournalFileBackend(str(path)))
     if sqlite:
         return SQLiteStorage(path)
-    return RDBStorage(location, engine_kwargs={"pool_pre_ping": True})
+    return open_database(location)
+
+
+def open_database(url: str) -> RDBStorage:
+    """An RDB storage at a SQLAlchemy URL; ConfigError (one line) for an unknown scheme, a missing
+    database driver or a database that cannot be reached."""
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
+
+    shown = url.split("@")[-1]  # no password in messages
+    try:
+        return RDBStorage(url, engine_kwargs={"pool_pre_ping": True})
+    except (NoSuchModuleError, ArgumentError) as err:
+        raise ConfigError(f"search.storage: {' '.join(str(err).split())[:200]}; use sqlite:///<file>, "
+                          f"postgresql://..., mysql://... or journal:<file>") from None
+    except ImportError as err:
+        raise ConfigError(f"search.storage: the database driver is missing ({err.name or err}); for PostgreSQL "
+                          f'pip install "hersd[cluster]"') from None
+    except OperationalError as err:
+        reason = " ".join(str(err.orig or err).split())[:200]
+        raise ConfigError(f"search.storage: cannot reach the database at {shown} ({reason})") from None
 
 
 # --------------------------------------------------------------------------- the plan a worker receives
@@ -307,8 +321,6 @@ def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str
     ``search_name`` (the ``conf/search`` file) is part of the default study name, so another
     search file starts another study while narrowed or widened ranges continue the same one.
     """
-    from hersd.train import compose as compose_train
-
     taken = searched_keys(search)
     for override in train_overrides:
         key = override.split("=", 1)[0].lstrip("+~")
@@ -471,10 +483,7 @@ def param_overrides(params: dict[str, Any]) -> list[str]:
 
 def mean_rates(params: dict[str, Any], epochs: int) -> tuple[float, float]:
     """mu_eps of a trial's schedule: exact over its epochs (eq. 10) and the approximation (eq. 11)."""
-    if params["kind"] == "constant":
-        return float(params["eps"]), float(params["eps"])
-    beta2 = params.get("beta2", 0.0)
-    return mean_rate_exact(params["beta1"], beta2, epochs), float(mean_rate_approx(params["beta1"], beta2))
+    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
 
 
 def seed_objective(values: np.ndarray, objective: str) -> float:
@@ -538,7 +547,7 @@ def _heartbeat(trial: optuna.Trial) -> None:
 
 def objective(trial: optuna.Trial, plan: SearchPlan) -> float:
     """Train the trial's runs (one per seed, in turn) and return the mean of their objectives."""
-    from hersd.train import compose as compose_train, train
+    from hersd.train import train
 
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     _heartbeat(trial)
@@ -634,12 +643,12 @@ def run_local(plan: SearchPlan, shares: list[int], trials_before: int) -> list[i
 
 def slurm_settings(slurm: SlurmConfig) -> dict[str, Any]:
     """Partition, time, CPUs and memory per worker job: ``search.slurm`` over hersd-sweep's preset."""
-    from hersd.train import CONF_DIR
+    from importlib.resources import files
 
     settings = dict(SLURM_FALLBACK)
-    preset = CONF_DIR / SLURM_PRESET
-    if preset.exists():
-        loaded = OmegaConf.to_container(OmegaConf.load(preset))
+    preset = files("hersd.conf").joinpath(*SLURM_PRESET)
+    if preset.is_file():
+        loaded = OmegaConf.to_container(OmegaConf.create(preset.read_text()))
         settings.update({key: loaded[key] for key in SLURM_FALLBACK if key in loaded})
     settings.update({key: value for key, value in asdict(slurm).items() if value is not None})
     return settings
@@ -696,9 +705,16 @@ def split_overrides(argv: list[str]) -> tuple[str, list[str], list[str]]:
 
 
 def write_report(plan: SearchPlan) -> list[Path]:
-    from analysis.search_figures import study_figures
+    """Draw the study's figures and tables by running the analysis layer's command (data flows
+    from the search to its storage to the analysis; the search never imports the analysis)."""
+    import subprocess
 
-    return study_figures(plan.storage, plan.report_dir, study_name=plan.study_name)
+    result = subprocess.run([sys.executable, "-m", "analysis.search_figures", plan.storage, plan.report_dir,
+                             "--study", plan.study_name], capture_output=True, text=True)
+    if result.returncode != 0:
+        print(f"hersd-search: the study's figures were not drawn: {result.stderr.strip()}", file=sys.stderr)
+        return []
+    return [Path(line) for line in result.stdout.splitlines() if line.strip()]
 
 
 def _fail(message: str) -> None:
@@ -709,8 +725,6 @@ def _fail(message: str) -> None:
 def main(argv: list[str] | None = None) -> None:
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
-
-    from hersd.train import explain_config_error
 
     argv = sys.argv[1:] if argv is None else argv
     if any(arg in ("-h", "--help") for arg in argv):

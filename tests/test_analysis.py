@@ -16,7 +16,7 @@ from analysis.figures import config_styles, mep_figures, q_figures
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
-from hersd.config import TASK_ENV_IDS, AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 from hersd.runlog import RunLogWriter, read_records, read_run
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
@@ -36,7 +36,7 @@ LINEAR_SUCCESS = [[0.95] * 6, [0.2] * 6]  # two flat seeds of "linear b1=0.5"
 
 def make_config(task: str = "push", schedule: ScheduleConfig | None = None, seed: int = 0, epochs: int = 6,
                 lambda_h: float = 1.0, mep: bool = False) -> TrainConfig:
-    return TrainConfig(task=TaskConfig(name=task, env_id=TASK_ENV_IDS[task]),
+    return TrainConfig(task=TaskConfig(name=task),
                        algo=AlgoConfig(name="archer" if lambda_h != 1.0 else "her", lambda_h=lambda_h,
                                        mep=MEPConfig(enabled=mep)),
                        schedule=schedule or ScheduleConfig(), seed=seed, epochs=epochs)

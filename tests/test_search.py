@@ -20,10 +20,10 @@ import pytest
 from optuna.trial import TrialState
 
 import hersd.train
+from hersd.compose import group_options
 from hersd.runlog import read_run
 from sweeps import search
 
-CONF_SEARCH = Path(hersd.train.CONF_DIR) / "search"
 TINY = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
         "ddpg.batch_size=64"]
 FINISHED = (TrialState.COMPLETE, TrialState.PRUNED)
@@ -45,9 +45,9 @@ def only_db(results: Path) -> str:
 
 
 # --------------------------------------------------------------------------- configuration
-@pytest.mark.parametrize("path", sorted(CONF_SEARCH.glob("*.yaml")), ids=lambda p: p.stem)
-def test_every_search_config_composes(path: Path) -> None:
-    config = search.compose_search([f"+search={path.stem}"])
+@pytest.mark.parametrize("name", group_options("search"))
+def test_every_search_config_composes(name: str) -> None:
+    config = search.compose_search([f"+search={name}"])
     assert config.space.beta1.low <= config.space.beta1.high
 
 
