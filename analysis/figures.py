@@ -22,11 +22,14 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
-from analysis.load import task_rank  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
+from hersd.schedules import MU_EPS_BAND as OPTIMAL_BAND  # noqa: E402
+from hersd.schedules import SCHEDULE_KINDS  # noqa: E402
+from hersd.tasks import task_rank, task_title  # noqa: E402
 
-TASK_TITLES = {"reach": "FetchReach", "push": "FetchPush", "pick_and_place": "FetchPickAndPlace", "slide": "FetchSlide"}
-OPTIMAL_BAND = (0.8, 0.889)  # the best fixed eps of the HER paper; the seed paper's target for mu_eps
+SCHEDULE_RANK = {kind: rank for rank, kind in enumerate(SCHEDULE_KINDS)}
+DECAY_PANEL_TITLES = {"linear": "linear decay (β2 = 0)", "exponential": "exponential decay",
+                      "success": "success-driven rate"}
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
     "share_real_failure": ("real, unsuccessful", "tab:red"),
@@ -50,10 +53,6 @@ class ReportFigure:
     figure: Figure
 
 
-def task_title(task: str) -> str:
-    return TASK_TITLES.get(task, task.replace("_", " ").title())
-
-
 def ordered_tasks(tasks) -> list[str]:
     """Tasks in the paper's order (reach, push, pick_and_place, slide), others after, alphabetically."""
     return sorted(set(tasks), key=task_rank)
@@ -75,7 +74,7 @@ def schedule_colours(table: pd.DataFrame) -> dict[tuple, tuple | str]:
     colours: dict[tuple, tuple | str] = {}
     count = {"linear": 0, "exponential": 0}
     rows = table[["schedule", "eps", "beta1", "beta2"]].drop_duplicates()
-    rows = rows.assign(order=rows["schedule"].map({"constant": 0, "linear": 1, "exponential": 2}))
+    rows = rows.assign(order=rows["schedule"].map(SCHEDULE_RANK))
     for row in rows.sort_values(["order", "beta1", "beta2", "eps"]).itertuples(index=False):
         key = (row.schedule, row.eps, row.beta1, row.beta2)
         if row.schedule == "constant":
@@ -265,9 +264,8 @@ def _learning_panels(present: pd.DataFrame) -> list[tuple[tuple | None, list[tup
     for weights in weight_groups:
         same = plain[(plain["lambda_r"] == weights[0]) & (plain["lambda_h"] == weights[1])]
         baselines = list(same.index[same["schedule"] == "constant"])
-        panels = [(f"{kind} decay" + (" (β2 = 0)" if kind == "linear" else ""),
-                   baselines + list(same.index[same["schedule"] == kind]))
-                  for kind in ("linear", "exponential") if (same["schedule"] == kind).any()]
+        panels = [(DECAY_PANEL_TITLES[kind], baselines + list(same.index[same["schedule"] == kind]))
+                  for kind in SCHEDULE_KINDS[1:] if (same["schedule"] == kind).any()]
         figures.append((weights, panels))
     return figures
 

@@ -22,20 +22,23 @@ import pandas as pd
 
 from hersd.config import ScheduleConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, RunLogError, read_records
-from hersd.schedules import schedule_mean_rate
+from hersd.runstore import NOT_HASHED
+from hersd.schedules import SCHEDULE_KINDS, schedule_mean_rate
+from hersd.tasks import task_rank
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
     "task",           # config.task.name
     "config",         # configuration label (ordered categorical, see config_label)
     "algo",           # config.algo.name
+    "learner",        # config.learner.name: ddpg (the paper's and every run before learners were a setting) | td3 | sac
     "schedule",       # config.schedule.kind: constant | linear | exponential
     "eps", "beta1", "beta2",
     "lambda_r", "lambda_h",
     "mep",            # config.algo.mep.enabled
     "seed",
     "total_epochs",   # K: config.epochs
-    "mu_eps",         # eq. 10 over the run's K (eps itself for constant)
+    "mu_eps",         # eq. 10 over the run's K (eps itself for constant; the mean logged rate for success)
     "epochs_done",    # completed epochs in the log
     "complete",       # the log says the run finished
     "damaged",        # the file has no valid end (killed or still running)
@@ -44,14 +47,8 @@ RUN_COLUMNS = (
 )
 
 # Config fields that change neither what a run computes nor which configuration it belongs to.
-_NOT_CONFIGURATION = ("seed", "results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint")
-_SCHEDULE_ORDER = {"constant": 0, "linear": 1, "exponential": 2}
-TASK_ORDER = ("reach", "push", "pick_and_place", "slide")  # the paper's order; other tasks follow alphabetically
-
-
-def task_rank(task: str) -> tuple[int, str]:
-    """Sort key putting tasks in TASK_ORDER, unknown ones after it alphabetically."""
-    return (TASK_ORDER.index(task) if task in TASK_ORDER else len(TASK_ORDER), task)
+_NOT_CONFIGURATION = ("seed", *NOT_HASHED)
+_SCHEDULE_ORDER = {kind: rank for rank, kind in enumerate(SCHEDULE_KINDS)}
 
 
 class ReportInputError(ValueError):
@@ -68,16 +65,19 @@ class RunTable:
 
 
 def schedule_label(schedule: str, eps: float, beta1: float, beta2: float) -> str:
-    """e.g. ``constant eps=0.8``, ``linear b1=0.25``, ``exp b1=0.5 b2=-0.5``."""
+    """e.g. ``constant eps=0.8``, ``linear b1=0.25``, ``exp b1=0.5 b2=-0.5``, ``success b1=0.25``."""
     if schedule == "constant":
         return f"constant eps={eps:g}"
+    if schedule == "success":
+        return f"success b1={beta1:g}"
     return f"linear b1={beta1:g}" if schedule == "linear" else f"exp b1={beta1:g} b2={beta2:g}"
 
 
 def config_label(schedule: str, eps: float, beta1: float, beta2: float,
-                 lambda_r: float, lambda_h: float, mep: bool) -> str:
+                 lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg") -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
-    ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``.
+    ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
+    than the paper's DDPG lead the label).
 
     Constant schedules are HER (lambda_r = lambda_h = 1) or ARCHER (lambda_r = 1,
     lambda_h = 0.5), with ``eps=`` appended when eps != 0.8; other reward weights are
@@ -95,13 +95,15 @@ def config_label(schedule: str, eps: float, beta1: float, beta2: float,
         qualifiers.append(f"λr={lambda_r:g}")
     if lambda_h != 1.0:
         qualifiers.append(f"λh={lambda_h:g}")
-    return " ".join([name + ("-MEP" if mep else "")] + qualifiers)
+    prefix = [] if learner == "ddpg" else [learner.upper()]
+    return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
 
 
 def _config_order(run: dict[str, Any]) -> tuple:
     """Sort key: HER, ARCHER and other constants first, then linear, then exponential."""
     baseline_rank = 0 if (run["lambda_r"], run["lambda_h"]) == (1.0, 1.0) else 1
-    return (_SCHEDULE_ORDER.get(run["schedule"], 3), run["mep"], baseline_rank, run["lambda_r"],
+    return (run["learner"] != "ddpg", run["learner"], _SCHEDULE_ORDER.get(run["schedule"], len(SCHEDULE_KINDS)),
+            run["mep"], baseline_rank, run["lambda_r"],
             -run["lambda_h"], run["eps"], run["beta1"], run["beta2"])
 
 
@@ -142,6 +144,7 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     row = {
         "task": config["task"]["name"],
         "algo": config["algo"]["name"],
+        "learner": str(config.get("learner", {}).get("name", "ddpg")),
         "schedule": schedule.kind,
         "eps": float(schedule.eps),
         "beta1": float(schedule.beta1),
@@ -201,6 +204,8 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
             skipped.append(f"{shown}: run metadata lacks or mistypes a config field ({err})")
             continue
         row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
+        if row["schedule"] == "success" and log.records:  # placed by the rate it realised
+            row["mu_eps"] = float(np.mean([record["relabel_rate"] for record in log.records]))
         rows.append(row)
         settings.append(run_settings)
         records.append(log.records)
@@ -218,8 +223,8 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
     settings = [settings[i] for i in keep]
     records = [records[i] for i in keep]
 
-    labels = [config_label(r["schedule"], r["eps"], r["beta1"], r["beta2"], r["lambda_r"], r["lambda_h"], r["mep"])
-              for r in rows]
+    labels = [config_label(r["schedule"], r["eps"], r["beta1"], r["beta2"], r["lambda_r"], r["lambda_h"], r["mep"],
+                           r["learner"]) for r in rows]
     # Within a task, seeds of one label must share every setting; where they do not, say what
     # differs. Across tasks a label may differ in budget (epochs, cycles): tasks are strata.
     labels = _distinguish(labels, settings, [(r["task"], label) for r, label in zip(rows, labels)])

@@ -19,9 +19,10 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.load import schedule_label, task_rank
+from analysis.load import schedule_label
 from hersd.config import ScheduleConfig
-from hersd.schedules import mean_rate_approx, mean_rate_exact, relabel_rate
+from hersd.schedules import FIXED_KINDS, SCHEDULE_KINDS, mean_rate_approx, mean_rate_exact, relabel_rate
+from hersd.tasks import task_rank
 
 GROUP = ["task", "config"]
 SUCCESS_THRESHOLDS = (0.5, 0.9)
@@ -198,14 +199,15 @@ def mean_q(epochs: pd.DataFrame) -> pd.DataFrame:
 
 
 def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
-    """eps(k) for k = 1..K of every distinct schedule (kind, eps, beta1, beta2, K) among the runs.
+    """eps(k) for k = 1..K of every distinct fixed schedule (kind, eps, beta1, beta2, K) among the runs
+    (success schedules depend on each run's progress: their rates are in the logs, not drawn here).
 
     Returns columns label (:func:`schedule_label`), schedule, eps_setting, beta1, beta2,
     total_epochs, epoch, eps; in the order constant, linear, exponential, then by beta1, beta2.
     """
     settings = ["schedule", "eps", "beta1", "beta2", "total_epochs"]
-    distinct = runs[settings].drop_duplicates()
-    distinct = distinct.assign(order=distinct["schedule"].map({"constant": 0, "linear": 1, "exponential": 2}))
+    distinct = runs.loc[runs["schedule"].isin(FIXED_KINDS), settings].drop_duplicates()
+    distinct = distinct.assign(order=distinct["schedule"].map({kind: i for i, kind in enumerate(SCHEDULE_KINDS)}))
     frames = []
     for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "total_epochs"]).itertuples(index=False):
         schedule = ScheduleConfig(kind=run.schedule, eps=run.eps, beta1=run.beta1, beta2=run.beta2)

@@ -27,8 +27,9 @@ def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[st
     """
     success = np.asarray(test_success, dtype=float)
     k = np.arange(1, len(success) + 1)
-    rate = np.array([relabel_rate(config.schedule, int(epoch), config.epochs) for epoch in k])
     train_success = 0.9 * success
+    rate = np.array([relabel_rate(config.schedule, int(epoch), config.epochs, train_success[:int(epoch) - 1])
+                     for epoch in k])
     cycles = config.task.cycles_per_epoch
     mep = config.algo.mep.enabled
     columns = {

@@ -333,3 +333,21 @@ def test_report_runs_without_torch_or_mujoco(sweep, tmp_path):
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "out" / "index.html").exists()
+
+
+def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_mean_rate(tmp_path):
+    from hersd.config import LearnerConfig
+
+    curve = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    write_run(tmp_path / "ddpg", make_config(), curve)
+    td3 = make_config()
+    td3.learner = LearnerConfig(name="td3")
+    write_run(tmp_path / "td3", td3, curve)
+    success = make_config(schedule=ScheduleConfig(kind="success", beta1=0.5, window=1))
+    write_run(tmp_path / "success", success, curve)
+    runs = load_runs(tmp_path).runs.set_index("config")
+    assert list(runs.index) == ["HER", "success b1=0.5", "TD3 HER"]  # DDPG first, schedules in their order
+    assert runs.loc["TD3 HER", "learner"] == "td3" and runs.loc["HER", "learner"] == "ddpg"
+    logged = read_run(tmp_path / "success" / "run.mcap").epochs["relabel_rate"]
+    assert list(logged) == pytest.approx([1.0, 1.0, 0.91, 0.82, 0.73, 0.64])  # 1 - 0.5 * last epoch's train success
+    assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())

@@ -1,0 +1,139 @@
+"""SAC with automatic temperature (Haarnoja et al. 2018, "Soft Actor-Critic Algorithms and
+Applications") on the DDPG core's inputs, networks and settings.
+
+- policy: an MLP of DDPG's size giving the mean and log std (clamped to [-20, 2], as in the
+  authors' code) of a Gaussian over pre-tanh actions; a = tanh(u), and
+  log pi(a|s) = log N(u) - sum log(1 - tanh(u)^2 + 1e-6);
+- twin critics; target r + gamma * (min(Q1', Q2')(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'),
+  clipped to [q_min, 0] as in the DDPG core;
+- actor loss mean(alpha * log pi(a|s) - min(Q1, Q2)(s, a)), a ~ pi(s) (no action_l2 term:
+  the entropy term is SAC's regulariser);
+- temperature: log alpha (starting at log init_alpha) steps with Adam (alpha_lr) on
+  -mean(log alpha * (log pi + target_entropy)), target_entropy = -dim(A) unless set.
+
+Exploration samples the policy with the run's numpy Generator (no added noise or random
+actions); test actions are tanh(mean). Critic targets move by polyak averaging once per cycle,
+as in the DDPG core; there is no actor target. Sampling inside updates uses torch's generator.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import torch
+
+from hersd.config import DDPGConfig, SACConfig
+from hersd.ddpg import DDPG, RunningNormalizer, UpdateStats, mlp
+from hersd.replay import TransitionBatch
+
+LOG_STD_RANGE = (-20.0, 2.0)
+
+
+class SAC(DDPG):
+    """A squashed-Gaussian actor, twin critics and a learnt temperature; DDPG's normalisers and inputs."""
+
+    def __init__(self, cfg: DDPGConfig, sac: SACConfig, obs_dim: int, goal_dim: int, action_dim: int,
+                 max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
+        self.cfg, self.max_action, self.gamma, self.q_min, self.device = cfg, max_action, gamma, q_min, device
+        self.action_dim = action_dim
+        self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm, device)
+        self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm, device)
+        in_dim = obs_dim + goal_dim
+        self.actor = mlp(in_dim, 2 * action_dim, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.critic2 = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.critic2_target = copy.deepcopy(self.critic2).requires_grad_(False)
+        self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
+                                           {"params": [*self.critic.parameters(), *self.critic2.parameters()],
+                                            "lr": cfg.critic_lr}], fused=True)
+        self.log_alpha = torch.tensor([math.log(sac.init_alpha)], device=device, requires_grad=True)
+        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=sac.alpha_lr)
+        self.target_entropy = -float(action_dim) if sac.target_entropy is None else sac.target_entropy
+
+    def policy(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised inputs (B, in_dim) -> mean and std (B, action_dim) of the pre-tanh Gaussian."""
+        mean, log_std = self.actor(inputs).chunk(2, dim=1)
+        return mean, log_std.clamp(*LOG_STD_RANGE).exp()
+
+    @staticmethod
+    def squash(mean: torch.Tensor, std: torch.Tensor, noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """u = mean + std * noise -> (tanh(u) (B, A), log pi(tanh(u)) (B, 1))."""
+        pre_tanh = mean + std * noise
+        action = torch.tanh(pre_tanh)
+        log_prob = (-0.5 * noise.square() - std.log() - 0.5 * math.log(2 * math.pi)).sum(1, keepdim=True)
+        return action, log_prob - torch.log(1.0 - action.square() + 1e-6).sum(1, keepdim=True)
+
+    def sample(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """An action in the tanh scale (B, A) drawn from the policy with torch's generator, and its log prob (B, 1)."""
+        mean, std = self.policy(inputs)
+        return self.squash(mean, std, torch.randn_like(mean))
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        """Actions (n, action_dim): sampled from the policy with ``rng`` if explore, else tanh(mean)."""
+        mean, std = self.policy(self._inputs(obs, goal))
+        if explore:
+            noise = self.tensor(rng.standard_normal(mean.shape).astype(np.float32))
+            action = torch.tanh(mean + std * noise)
+        else:
+            action = torch.tanh(mean)
+        return (action * self.max_action).cpu().numpy().astype(np.float64)
+
+    @property
+    def alpha(self) -> float:
+        return float(self.log_alpha.exp().item())
+
+    @torch.no_grad()
+    def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
+        """r + gamma * (min Q'(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'), clipped to [q_min, 0]: (B, 1)."""
+        next_action, next_log_prob = self.sample(next_inputs)
+        target_inputs = torch.cat([next_inputs, next_action], dim=1)
+        next_q = torch.minimum(self.critic_target(target_inputs), self.critic2_target(target_inputs))
+        soft_q = next_q - self.log_alpha.exp() * next_log_prob
+        return torch.clamp(reward + self.gamma * soft_q, self.q_min, 0.0)
+
+    def update(self, batch: TransitionBatch) -> UpdateStats:
+        """One step of both critics, the actor (through frozen critics) and the temperature."""
+        inputs = self._inputs(batch.obs, batch.goal)
+        action = self.tensor(batch.action) / self.max_action
+        target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
+        critic_inputs = torch.cat([inputs, action], dim=1)
+        q = self.critic(critic_inputs)
+        critic_loss = torch.mean(torch.square(target_q - q)) + torch.mean(torch.square(target_q - self.critic2(critic_inputs)))
+        policy_action, log_prob = self.sample(inputs)
+        policy_inputs = torch.cat([inputs, policy_action], dim=1)
+        frozen = [{name: p.detach() for name, p in net.named_parameters()} for net in (self.critic, self.critic2)]
+        policy_q = torch.minimum(torch.func.functional_call(self.critic, frozen[0], (policy_inputs,)),
+                                 torch.func.functional_call(self.critic2, frozen[1], (policy_inputs,)))
+        alpha = self.log_alpha.exp().detach()
+        actor_loss = torch.mean(alpha * log_prob - policy_q)
+        self.optimizer.zero_grad(set_to_none=True)
+        (critic_loss + actor_loss).backward()
+        self.optimizer.step()
+        alpha_loss = -torch.mean(self.log_alpha * (log_prob.detach() + self.target_entropy))
+        self.alpha_optimizer.zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.alpha_optimizer.step()
+        q = q.detach()
+        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item())
+
+    @torch.no_grad()
+    def update_targets(self) -> None:
+        """Polyak-move both critics' targets (SAC has no actor target)."""
+        for online, target in ((self.critic, self.critic_target), (self.critic2, self.critic2_target)):
+            torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), 1.0 - self.cfg.polyak)
+
+    def state_dict(self) -> dict:
+        return {**{name: getattr(self, name).state_dict() for name in
+                   ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
+                    "obs_norm", "goal_norm")}, "log_alpha": self.log_alpha.detach().clone()}
+
+    def load_state_dict(self, state: dict) -> None:
+        state = dict(state)
+        with torch.no_grad():
+            self.log_alpha.copy_(state.pop("log_alpha"))
+        for name, value in state.items():
+            getattr(self, name).load_state_dict(value)

@@ -1,0 +1,147 @@
+"""TD3 and SAC: their update rules on tiny networks, exact resume, and learning FetchReach."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from conftest import TINY, metrics
+from test_ddpg import ACTION, BATCH, GOAL, OBS, batch
+
+from hersd.compose import compose_train
+from hersd.config import DDPGConfig, SACConfig, TD3Config
+from hersd.runlog import read_run
+from hersd.sac import SAC
+from hersd.td3 import TD3
+from hersd.train import train
+
+SMALL = DDPGConfig(hidden_layers=2, hidden_units=16)
+
+
+def make(learner: str, **settings):
+    torch.manual_seed(0)
+    if learner == "td3":
+        agent = TD3(SMALL, TD3Config(**settings), OBS, GOAL, ACTION, 1.0, 0.98, -50.0)
+    else:
+        agent = SAC(SMALL, SACConfig(**settings), OBS, GOAL, ACTION, 1.0, 0.98, -50.0)
+    rng = np.random.default_rng(0)
+    agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
+    return agent
+
+
+def test_td3_target_takes_the_minimum_of_the_twin_critics_at_smoothed_target_actions():
+    agent = make("td3")
+    with torch.no_grad():  # make the twin targets disagree: Q2' = Q1' - 1 everywhere
+        agent.critic2_target.load_state_dict(agent.critic_target.state_dict())
+        agent.critic2_target[-1].bias -= 1.0
+    data = batch()
+    next_inputs = agent._inputs(data.next_obs, data.goal)
+    reward = torch.full((BATCH, 1), -0.5)
+    torch.manual_seed(7)
+    target = agent.target_q(next_inputs, reward)
+    torch.manual_seed(7)
+    with torch.no_grad():
+        action = torch.tanh(agent.actor_target(next_inputs))
+        noise = (torch.randn_like(action) * 0.2).clamp(-0.5, 0.5)
+        smoothed = torch.cat([next_inputs, (action + noise).clamp(-1, 1)], 1)
+        q1, q2 = agent.critic_target(smoothed), agent.critic2_target(smoothed)
+        unsmoothed = agent.critic_target(torch.cat([next_inputs, action], 1))
+    assert torch.all(q2 < q1)
+    assert torch.allclose(target, torch.clamp(reward + 0.98 * q2, -50, 0))
+    assert not torch.allclose(target, torch.clamp(reward + 0.98 * unsmoothed - 0.98, -50, 0))  # the noise mattered
+
+
+def test_td3_actor_steps_once_per_policy_delay_updates():
+    agent = make("td3", policy_delay=2)
+    snapshots = [copy.deepcopy(agent.actor.state_dict())]
+    for seed in range(4):
+        agent.update(batch(seed=seed))
+        snapshots.append(copy.deepcopy(agent.actor.state_dict()))
+    moved = [any(not torch.equal(a[k], b[k]) for k in a) for a, b in zip(snapshots, snapshots[1:])]
+    assert moved == [True, False, True, False]
+
+
+@pytest.mark.parametrize("learner", ["td3", "sac"])
+def test_target_q_is_clipped_to_its_range(learner):
+    agent = make(learner)
+    data = batch()
+    next_inputs = agent._inputs(data.next_obs, data.goal)
+    assert torch.all(agent.target_q(next_inputs, torch.full((BATCH, 1), 1e6)) == 0.0)
+    assert torch.all(agent.target_q(next_inputs, torch.full((BATCH, 1), -1e6)) == -50.0)
+
+
+def test_sac_log_prob_is_the_squashed_gaussians():
+    agent = make("sac")
+    mean, std = torch.randn(BATCH, ACTION), torch.rand(BATCH, ACTION) + 0.1
+    noise = torch.randn(BATCH, ACTION)
+    action, log_prob = agent.squash(mean, std, noise)
+    pre_tanh = mean + std * noise
+    expected = torch.distributions.Normal(mean, std).log_prob(pre_tanh).sum(1, keepdim=True) \
+        - torch.log(1 - torch.tanh(pre_tanh) ** 2 + 1e-6).sum(1, keepdim=True)
+    assert torch.allclose(action, torch.tanh(pre_tanh)) and torch.allclose(log_prob, expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("target_entropy, direction", [(50.0, 1), (-50.0, -1)])
+def test_sac_temperature_moves_towards_its_target_entropy(target_entropy, direction):
+    agent = make("sac", target_entropy=target_entropy)  # far above / below any entropy the policy has
+    alphas = [agent.alpha]
+    for seed in range(5):
+        agent.update(batch(seed=seed))
+        alphas.append(agent.alpha)
+    assert all(direction * (b - a) > 0 for a, b in zip(alphas, alphas[1:])), alphas
+
+
+def test_sac_explores_by_sampling_and_tests_with_the_mean():
+    agent = make("sac")
+    data = batch()
+    explored = agent.act(data.obs, data.goal, explore=True, rng=np.random.default_rng(0))
+    again = agent.act(data.obs, data.goal, explore=True, rng=np.random.default_rng(0))
+    deterministic = agent.act(data.obs, data.goal, explore=False, rng=np.random.default_rng(1))
+    assert np.array_equal(explored, again) and not np.allclose(explored, deterministic)
+    assert np.all(np.abs(explored) <= 1.0)
+
+
+@pytest.mark.parametrize("learner", ["td3", "sac"])
+def test_state_dict_round_trip_gives_the_same_next_updates(learner):
+    agent = make(learner)
+    agent.update(batch(seed=2))
+    clone = make(learner)
+    clone.load_state_dict(copy.deepcopy(agent.state_dict()))
+    for seed in (3, 4, 5):
+        torch.manual_seed(seed)
+        first = agent.update(batch(seed=seed))
+        torch.manual_seed(seed)
+        assert clone.update(batch(seed=seed)) == first
+
+
+class Stop(Exception):
+    pass
+
+
+@pytest.mark.parametrize("learner", ["td3", "sac"])
+def test_an_interrupted_run_resumes_to_the_uninterrupted_metrics(tmp_path, learner):
+    args = [*TINY, "quiet=true", "threads=1", "epochs=3", f"learner={learner}"]
+    reference = train(compose_train([*args, f"results_dir={tmp_path / 'ref'}"]))
+    cut = compose_train([*args, f"results_dir={tmp_path / 'cut'}"])
+
+    def stop_after_2(record):
+        if record["epoch"] == 2:
+            raise Stop
+
+    with pytest.raises(Stop):
+        train(cut, on_epoch=stop_after_2)
+    resumed = train(cut)
+    assert f"/{learner}-her/" in str(resumed)
+    pd.testing.assert_frame_equal(metrics(resumed), metrics(reference))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("learner, epochs", [("td3", 5), ("sac", 10)])
+def test_fetch_reach_learns_at_the_defaults(tmp_path, learner, epochs):
+    """Paper settings on FetchReach (10 cycles/epoch), seed 0: test success >= 0.9 within the epochs."""
+    log = read_run(train(compose_train(["task=reach", f"learner={learner}", f"epochs={epochs}", "seed=0",
+                                       "quiet=true", "threads=1", f"results_dir={tmp_path}"])))
+    assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()
