@@ -106,18 +106,23 @@ def _html_table(table: pd.DataFrame) -> str:
     return table.to_html(index=False, na_rep="", float_format=lambda v: f"{v:.3f}", border=0, classes="data")
 
 
-def _search_section(folder: Path, out: Path) -> tuple[list[Path], list[str]]:
+def _search_section(folder: Path, out: Path, storages: Sequence[str] = ()) -> tuple[list[Path], list[str]]:
     """Figures and best-trial tables of the Optuna studies under ``folder/search`` (hersd-search's
-    default storage) -> (files written, HTML parts); nothing when there is no study."""
-    databases = sorted((folder / "search").glob("*.db"))
-    if not databases:
+    default SQLite files, and journal files) and in ``storages`` (URLs or files) -> (files
+    written, HTML parts); nothing when there is no study."""
+    found = sorted(path for pattern in ("*.db", "*.log", "*.journal") for path in (folder / "search").glob(pattern))
+    sources = [str(path) for path in found] + list(storages)
+    if not sources:
         return [], []
-    from analysis.search_figures import study_figures  # imports optuna, only needed here
+    from analysis.search_figures import StudyStorageError, study_figures  # imports optuna, only needed here
 
     written: list[Path] = []
     parts = ["<h2>Optuna searches</h2>"]
-    for database in databases:
-        files = study_figures(database, out / "search")
+    for source in sources:
+        try:
+            files = study_figures(source, out / "search")
+        except StudyStorageError as err:
+            raise ReportInputError(f"--storage {source.split('@')[-1]}: {err}") from None
         written += files
         for path in files:
             if path.suffix == ".png":
@@ -158,9 +163,10 @@ def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, run
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
                  algos: Sequence[str] | None = None, window: int = DEFAULT_WINDOW, fmt: str = "png",
                  log: Callable[[str], None] = print,
-                 warn: Callable[[str], None] = lambda line: print(line, file=sys.stderr)) -> ReportResult:
+                 warn: Callable[[str], None] = lambda line: print(line, file=sys.stderr),
+                 storages: Sequence[str] = ()) -> ReportResult:
     """Load, compute, draw and write the report; ``log`` receives progress lines, ``warn``
-    one line per skipped log.
+    one line per skipped log; ``storages`` adds Optuna study storages beyond ``folder/search``.
 
     Raises :class:`ReportInputError` for input that cannot make a report.
     """
@@ -205,7 +211,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     start = time.perf_counter()
     tables = _write_tables({"summary": analysis.summary, "aggregate": analysis.aggregate,
                             "runs": runs.drop(columns="run")}, out / "tables")
-    search_files, search_parts = _search_section(folder, out)
+    search_files, search_parts = _search_section(folder, out, storages)
     saved += [path for path in search_files if path.suffix != ".csv" and path.suffix != ".md"]
     tables += [path for path in search_files if path.suffix in (".csv", ".md")]
     index = out / "index.html"
@@ -231,10 +237,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--smooth", type=int, default=DEFAULT_WINDOW, metavar="N",
                         help=f"moving-average window of the learning curves in epochs (default {DEFAULT_WINDOW})")
     parser.add_argument("--format", choices=FORMATS, default="png", help="figure file format (default png)")
+    parser.add_argument("--storage", action="append", default=[], metavar="URL",
+                        help="also draw the Optuna studies of this storage (a SQLAlchemy URL such as "
+                             "postgresql://..., a .db file or a journal file); repeatable")
     args = parser.parse_args(argv)
     try:
         result = build_report(args.folder, args.out, tasks=args.task, algos=args.algo, window=args.smooth,
-                              fmt=args.format)
+                              fmt=args.format, storages=args.storage)
     except ReportInputError as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2

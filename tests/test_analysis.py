@@ -351,3 +351,30 @@ def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_
     logged = read_run(tmp_path / "success" / "run.mcap").epochs["relabel_rate"]
     assert list(logged) == pytest.approx([1.0, 1.0, 0.91, 0.82, 0.73, 0.64])  # 1 - 0.5 * last epoch's train success
     assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())
+
+
+@pytest.mark.parametrize("storage, message", [
+    ("foo://nowhere", "not a storage URL"),
+    ("postgresql+psycopg2://user@127.0.0.1:1/none", "cannot reach the database at 127.0.0.1:1/none"),
+    ("/no/such/study.db", "no such study storage"),
+])
+def test_a_bad_study_storage_is_one_line_with_exit_2(hand_sized, tmp_path, capsys, storage, message):
+    import importlib.util
+
+    if storage.startswith("postgresql") and importlib.util.find_spec("psycopg2") is None:
+        message = "the database driver is missing"
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "out"), "--storage", storage]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, err
+
+
+def test_a_study_storage_given_on_the_command_line_is_drawn(hand_sized, tmp_path):
+    import optuna
+
+    storage = f"sqlite:///{tmp_path / 'elsewhere.sqlite'}"
+    study = optuna.create_study(study_name="given", storage=storage, direction="maximize")
+    study.enqueue_trial({"beta1": 0.25, "beta2": 0.0})
+    study.optimize(lambda trial: trial.suggest_float("beta1", 0, 1) + trial.suggest_float("beta2", -1, 1), n_trials=3)
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "out"), "--storage", storage]) == 0
+    assert (tmp_path / "out" / "search" / "given_beta_plane.png").exists()
+    assert "given" in (tmp_path / "out" / "index.html").read_text()
