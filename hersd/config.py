@@ -209,7 +209,7 @@ class TD3Config:
 @dataclass
 class SACConfig:
     # SAC (Haarnoja et al. 2018, automatic temperature): squashed Gaussian policy, twin critics.
-    init_alpha: float = 1.0  # initial entropy temperature alpha (log alpha starts at 0, as in the authors' code)
+    init_alpha: float = 1.0  # initial entropy temperature alpha (log alpha 0: the usual start; the SAC paper gives none)
     alpha_lr: float = 3e-4  # Adam learning rate of log(alpha) (the SAC paper's 3e-4)
     target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
 
