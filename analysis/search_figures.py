@@ -225,15 +225,18 @@ def open_study_storage(spec: str) -> optuna.storages.BaseStorage:
             return JournalStorage(JournalFileBackend(str(path)))
         spec = f"sqlite:///{path.resolve()}"
     try:
-        return RDBStorage(spec, skip_table_creation=True)
+        storage = RDBStorage(spec, skip_table_creation=True)
+        storage.get_all_studies()  # connects: an unreachable database fails here, not later
+        return storage
     except (NoSuchModuleError, ArgumentError) as err:
         raise StudyStorageError(f"{spec}: not a storage URL ({' '.join(str(err).split())[:160]})") from None
     except ImportError as err:
         raise StudyStorageError(f"the database driver is missing ({err.name or err}); for PostgreSQL "
                                 f'pip install "hersd[cluster]"') from None
-    except OperationalError as err:
+    except (OperationalError, optuna.exceptions.StorageInternalError) as err:
+        cause = getattr(err, "orig", None) or err.__cause__ or err  # optuna wraps SQLAlchemy's error
         raise StudyStorageError(f"cannot reach the database at {spec.split('@')[-1]} "
-                                f"({' '.join(str(err.orig or err).split())[:160]})") from None
+                                f"({' '.join(str(getattr(cause, 'orig', None) or cause).split())[:160]})") from None
 
 
 def main(argv: list[str] | None = None) -> int:
