@@ -1,13 +1,17 @@
-"""Drawing: each figure function takes an :class:`analysis.metrics.Analysis` and returns the
-figures it can make from the data present (none when that data is missing).
+"""Drawing: each figure builder takes an :class:`analysis.metrics.Analysis` and returns the
+figures the data allows (none when the data for one is missing) as :class:`ReportFigure`\\ s.
+Choosing what to draw is cheap and done at once; the drawing itself is ``ReportFigure.draw()``,
+which the report runs in worker processes, one per core.
 
-:data:`FIGURE_BUILDERS` lists them in report order; a new figure (e.g. an Optuna study's)
-is one more function appended there.
+:data:`FIGURE_BUILDERS` lists the builders in report order; a new figure (e.g. an Optuna
+study's) is one more function appended there.
 """
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import matplotlib
@@ -22,14 +26,13 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
+from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, schedule_rank  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
-from hersd.schedules import MU_EPS_BAND as OPTIMAL_BAND  # noqa: E402
-from hersd.schedules import SCHEDULE_KINDS  # noqa: E402
+from hersd.schedules import FIXED_KINDS, MU_EPS_BAND, SCHEDULE_KINDS  # noqa: E402
 from hersd.tasks import task_rank, task_title  # noqa: E402
 
-SCHEDULE_RANK = {kind: rank for rank, kind in enumerate(SCHEDULE_KINDS)}
-DECAY_PANEL_TITLES = {"linear": "linear decay (β2 = 0)", "exponential": "exponential decay",
-                      "success": "success-driven rate"}
+KIND_TITLES = {"constant": "constant", "linear": "linear decay (β2 = 0)", "exponential": "exponential decay",
+               "success": "success-driven rate"}
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
     "share_real_failure": ("real, unsuccessful", "tab:red"),
@@ -40,22 +43,41 @@ PALETTE = [*colormaps["tab10"].colors[:7], *colormaps["tab10"].colors[8:], *colo
 PANEL_SIZE = (4.4, 3.0)  # inches per panel
 MAX_COLUMNS = 4
 ALTERNATE_DASHES = [":", (0, (6, 2, 1, 2, 1, 2)), (0, (10, 3))]  # for configs whose usual style is taken
-LEGEND_WIDTH = 2.3  # inches reserved right of the panels for a figure legend
+LEGEND_WIDTH = 2.3  # inches reserved right of the panels for a figure legend, at least
+LEGEND_CHARACTERS = 34  # legend entries are wrapped to lines of at most this many characters
+GLYPH_WIDTH = 0.6  # average width of a DejaVu Sans glyph, in em: how many characters fit a width
+TITLE_SIZE, PANEL_TITLE_SIZE, LEGEND_SIZE = 12, 10, 8  # points
+EPOCH_TICKS = 4  # intervals between epoch ticks, at most
 
 
 @dataclass
 class ReportFigure:
-    """One figure of the report: ``name`` is the file stem, ``caption`` says what is drawn."""
+    """One figure of the report: ``name`` is the file stem, ``caption`` says what is drawn,
+    ``draw()`` makes the matplotlib figure (a new one on every call)."""
 
     name: str
     title: str
     caption: str
-    figure: Figure
+    draw: Callable[[], Figure]
 
 
 def ordered_tasks(tasks) -> list[str]:
-    """Tasks in the paper's order (reach, push, pick_and_place, slide), others after, alphabetically."""
+    """Tasks in the order of hersd.tasks.TASKS (the paper's first), others after, alphabetically."""
     return sorted(set(tasks), key=task_rank)
+
+
+def wrap(text: str, characters: int) -> str:
+    """``text`` broken at spaces into lines of at most ``characters`` (a longer word stays whole)."""
+    return "\n".join(textwrap.wrap(text, characters, break_long_words=False)) or text
+
+
+def _fitting(text: str, inches: float, fontsize: float) -> str:
+    """``text`` wrapped to fit ``inches`` at ``fontsize`` points."""
+    return wrap(text, max(10, int(inches * 72 / (GLYPH_WIDTH * fontsize))))
+
+
+def _lines(text: str) -> int:
+    return text.count("\n") + 1
 
 
 def _config_table(analysis: Analysis) -> pd.DataFrame:
@@ -65,20 +87,25 @@ def _config_table(analysis: Analysis) -> pd.DataFrame:
             .sort_index())
 
 
+def _has_weights(table: pd.DataFrame, weights: tuple[float, float]) -> pd.Series:
+    """Rows of ``table`` (columns lambda_r, lambda_h) with these reward weights."""
+    return (table["lambda_r"] == weights[0]) & (table["lambda_h"] == weights[1])
+
+
 def schedule_colours(table: pd.DataFrame) -> dict[tuple, tuple | str]:
     """Colour of each schedule (kind, eps, beta1, beta2) in ``table`` (columns schedule, eps, beta1, beta2).
 
-    Constant eps 0.8 black, other constants brown; decay schedules take PALETTE in order
+    Constant HER_EPS black, other constants brown; other schedules take PALETTE in order
     within their kind, so each panel (one kind) uses the most distinct colours.
     """
     colours: dict[tuple, tuple | str] = {}
-    count = {"linear": 0, "exponential": 0}
+    count: dict[str, int] = {}
     rows = table[["schedule", "eps", "beta1", "beta2"]].drop_duplicates()
-    rows = rows.assign(order=rows["schedule"].map(SCHEDULE_RANK))
+    rows = rows.assign(order=rows["schedule"].map(schedule_rank))
     for row in rows.sort_values(["order", "beta1", "beta2", "eps"]).itertuples(index=False):
         key = (row.schedule, row.eps, row.beta1, row.beta2)
         if row.schedule == "constant":
-            colours[key] = "black" if row.eps == 0.8 else "tab:brown"
+            colours[key] = "black" if row.eps == HER_EPS else "tab:brown"
         else:
             colours[key] = PALETTE[count.setdefault(row.schedule, 0) % len(PALETTE)]
             count[row.schedule] += 1
@@ -96,7 +123,7 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
     used: dict[tuple, int] = {}
     for config, row in configs.iterrows():
         colour = colours[(row["schedule"], row["eps"], row["beta1"], row["beta2"])]
-        if row["schedule"] == "constant" and (row["lambda_r"], row["lambda_h"]) == (1.0, 0.5):
+        if row["schedule"] == "constant" and (row["lambda_r"], row["lambda_h"]) == ARCHER_WEIGHTS:
             colour = "0.55"
         linestyle = "--" if row["mep"] else ("-." if row["schedule"] == "exponential" else "-")
         repeats = used.get((colour, linestyle), 0)
@@ -107,34 +134,66 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
     return styles
 
 
+# --- layout ------------------------------------------------------------------------------------------------------
+
 def _panels(count: int, title: str, legend_width: float = 0.0, sharey: bool = True, title_lines: int = 1):
-    """A figure of ``count`` panels in rows of at most MAX_COLUMNS, laid out with fixed
-    margins in inches (``legend_width`` inches kept free on the right). Returns (figure, axes)."""
+    """A figure of ``count`` panels in rows of at most MAX_COLUMNS, laid out with fixed margins in
+    inches (``legend_width`` kept free on the right, ``title_lines`` lines above each panel for its
+    title); the figure title is wrapped to the figure's width. Inner panels share the x axis (and
+    the y axis with ``sharey``) and show tick labels only on the outside. Returns (figure, axes)."""
     columns = min(count, MAX_COLUMNS)
     rows = -(-count // columns)
     panel_width, panel_height = PANEL_SIZE
     left, right, bottom = 0.95, 0.15, 0.55
-    top = 0.45 + 0.2 * title_lines
     gap_width = 0.25 if sharey else 0.6
     gap_height = 0.3 + 0.2 * title_lines
     width = left + columns * panel_width + (columns - 1) * gap_width + legend_width + right
+    title = _fitting(title, width - 0.2, TITLE_SIZE)
+    top = 0.25 + 0.22 * _lines(title) + 0.2 * title_lines
     height = bottom + rows * panel_height + (rows - 1) * gap_height + top
     figure = Figure(figsize=(width, height))
-    axes = figure.subplots(rows, columns, sharex=True, sharey=sharey, squeeze=False, gridspec_kw={
-        "left": left / width, "right": 1 - (legend_width + right) / width, "bottom": bottom / height,
-        "top": 1 - top / height, "wspace": gap_width / panel_width, "hspace": gap_height / panel_height}).ravel()
-    for extra in axes[count:]:
-        extra.set_visible(False)
-    for axis in axes[:count]:
+    grid = figure.add_gridspec(rows, columns, left=left / width, right=1 - (legend_width + right) / width,
+                               bottom=bottom / height, top=1 - top / height, wspace=gap_width / panel_width,
+                               hspace=gap_height / panel_height)
+    axes = []
+    for index in range(count):  # only the panels drawn: an empty grid cell costs as much as a panel
+        shared = axes[0] if axes else None
+        axis = figure.add_subplot(grid[index // columns, index % columns], sharex=shared,
+                                  sharey=shared if sharey else None)
         axis.grid(alpha=0.3)
-    figure.suptitle(title, fontsize=12, y=1 - 0.08 / height, va="top")
-    return figure, axes[:count]
+        axis.tick_params(labelbottom=index + columns >= count, labelleft=index % columns == 0 or not sharey)
+        axes.append(axis)
+    figure.suptitle(title, fontsize=TITLE_SIZE, y=1 - 0.08 / height, va="top")
+    return figure, axes
 
 
-def _legend_width(labels, fontsize: float = 8) -> float:
-    """Inches a figure legend of these labels needs (handle plus text), at least LEGEND_WIDTH."""
-    longest = max((len(str(label)) for label in labels), default=0)
-    return max(LEGEND_WIDTH, 0.7 + 0.075 * longest * fontsize / 8)
+def _set_title(axis, text: str, fontsize: float = PANEL_TITLE_SIZE) -> None:
+    """A panel title at a fixed place (y=1 plus the usual pad): matplotlib's automatic placement
+    measures the tick labels of the shared axes of every panel, a large share of the drawing time."""
+    axis.set_title(text, fontsize=fontsize, y=1.0)
+
+
+def _label_outer(axes, ylabel: str, xlabel: str = "epoch") -> None:
+    """x label under the bottom panel of each column, y label left of each row; epochs get few whole-number ticks
+    (each tick costs drawing time in every panel)."""
+    columns = min(len(axes), MAX_COLUMNS)
+    for index, axis in enumerate(axes):
+        if xlabel.startswith("epoch"):  # whole epochs, at most ~5 ticks (0, 50, ..., 200 for the paper's K)
+            axis.xaxis.set_major_locator(MaxNLocator(nbins=EPOCH_TICKS, integer=True, steps=[1, 2, 2.5, 5, 10]))
+        if index % columns == 0:
+            axis.set_ylabel(ylabel)
+        if index + columns >= len(axes):
+            axis.set_xlabel(xlabel)
+
+
+def _legend_label(text: str) -> str:
+    return wrap(str(text), LEGEND_CHARACTERS)
+
+
+def _legend_width(labels, fontsize: float = LEGEND_SIZE) -> float:
+    """Inches a figure legend of these labels needs (handle plus wrapped text), at least LEGEND_WIDTH."""
+    longest = max((len(line) for label in labels for line in _legend_label(label).splitlines()), default=0)
+    return max(LEGEND_WIDTH, 0.7 + longest * GLYPH_WIDTH * fontsize / 72)
 
 
 def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None:
@@ -143,71 +202,64 @@ def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None
     for axis in axes:
         for handle, label in zip(*axis.get_legend_handles_labels()):
             entries.setdefault(label, handle)
-    width, height = figure.get_size_inches()
+    width, _ = figure.get_size_inches()
     top = axes[0].get_position().y1
-    options = {"fontsize": 8, **options}
+    options = {"fontsize": LEGEND_SIZE, **options}
     figure.legend(list(entries.values()), list(entries), loc="upper left", frameon=False,
                   bbox_to_anchor=(1 - (legend_width + 0.05) / width, top), **options)
-
-
-def _label_outer(axes, ylabel: str, xlabel: str = "epoch") -> None:
-    """x label under the bottom panel of each column, y label left of each row; epochs get whole-number ticks."""
-    for axis in axes:
-        if xlabel.startswith("epoch"):
-            axis.xaxis.set_major_locator(MaxNLocator(integer=True))
-        spec = axis.get_subplotspec()
-        if spec.is_first_col():
-            axis.set_ylabel(ylabel)
-        bottom_of_column = spec.is_last_row() or not any(
-            other.get_subplotspec().colspan == spec.colspan and other.get_subplotspec().rowspan.start > spec.rowspan.start
-            for other in axes)
-        if bottom_of_column:
-            axis.set_xlabel(xlabel)
-            axis.xaxis.set_tick_params(labelbottom=True)
 
 
 def _draw_curve(axis, medians: pd.DataFrame, config: str, style: dict) -> None:
     """Median line and min-max band of one config (``medians``: one task's median curves)."""
     curve = medians[medians["config"] == config]
     axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
-    axis.plot(curve["epoch"], curve["median"], label=config, **style)
+    axis.plot(curve["epoch"], curve["median"], label=_legend_label(config), **style)
 
 
 def _success_ylabel(window: int) -> str:
     return f"test success (median over seeds\nof {window}-epoch moving average)"
 
 
+# --- Fig. 1: schedules -------------------------------------------------------------------------------------------
+
 def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
-    """Fig. 1: eps(k) of every schedule present, one panel per decay kind."""
+    """Fig. 1: eps(k) of every schedule of a fixed kind present, one panel per decay kind."""
     curves = metrics.schedule_curves(analysis.runs)
+    if curves.empty:
+        return []
+    caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, per epoch, "
+               "for each schedule of the loaded runs (eq. 9; several configurations may share a schedule). "
+               f"Constant schedules (HER and ARCHER use ε = {HER_EPS:g}) are dashed and drawn in every panel.")
+    return [ReportFigure("schedules", "Relabel-rate schedules (Fig. 1)", caption, partial(_draw_schedules, curves))]
+
+
+def _draw_schedules(curves: pd.DataFrame) -> Figure:
     colours = schedule_colours(curves.rename(columns={"eps": "eps_k", "eps_setting": "eps"}))
-    kinds = [kind for kind in ("linear", "exponential") if kind in set(curves["schedule"])] or ["constant"]
+    kinds = [kind for kind in FIXED_KINDS[1:] if kind in set(curves["schedule"])] or ["constant"]
+    several_k = curves["total_epochs"].nunique() > 1
     figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k) = 1 − β1·(k/K)^exp(β2)")
     for axis, kind in zip(axes, kinds):
         shown = curves[curves["schedule"].isin(["constant", kind])]
         for (label, total_epochs), curve in shown.groupby(["label", "total_epochs"], sort=False):
             first = curve.iloc[0]
             colour = colours[(first["schedule"], first["eps_setting"], first["beta1"], first["beta2"])]
-            several_k = curves["total_epochs"].nunique() > 1
             axis.plot(curve["epoch"], curve["eps"], color=colour, linewidth=1.5,
                       linestyle="--" if first["schedule"] == "constant" else "-",
                       label=label + (f" (K={total_epochs})" if several_k else ""))
-        axis.set_title({"constant": "constant", "linear": "linear decay (β2 = 0)",
-                        "exponential": "exponential decay"}[kind], fontsize=10)
+        _set_title(axis, KIND_TITLES[kind])
         axis.set_ylim(-0.02, 1.02)
         axis.legend(fontsize=7, loc="lower left")
     _label_outer(axes, "relabel rate ε(k)\n(share of goals relabelled)", xlabel="epoch k")
-    caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, per epoch, "
-               "for each schedule of the loaded runs (eq. 9; several configurations may share a schedule). "
-               "Constant schedules (HER and ARCHER use ε = 0.8) are dashed and drawn in every panel.")
-    return [ReportFigure("schedules", "Relabel-rate schedules (Fig. 1)", caption, figure)]
+    return figure
 
+
+# --- Fig. 2: minibatch composition -------------------------------------------------------------------------------
 
 def _composition_configs(configs: pd.DataFrame, present: set[str]) -> list[str]:
     """Configs to show minibatch composition for: without MEP; only HER's reward weights
     when some decay schedule was run with them."""
     candidates = configs.loc[[c for c in configs.index if c in present and not configs.loc[c, "mep"]]]
-    her_weights = candidates[(candidates["lambda_r"] == 1.0) & (candidates["lambda_h"] == 1.0)]
+    her_weights = candidates[_has_weights(candidates, HER_WEIGHTS)]
     if (her_weights["schedule"] != "constant").any():
         candidates = her_weights
     return list(candidates.index)
@@ -215,45 +267,57 @@ def _composition_configs(configs: pd.DataFrame, present: set[str]) -> list[str]:
 
 def composition_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 2: per task, stacked minibatch shares over epochs, HER beside each decay schedule."""
-    shares = metrics.composition(analysis.epochs)
     configs = _config_table(analysis)
     found = []
-    for task in ordered_tasks(shares["task"]):
-        task_shares = shares[shares["task"] == task]
+    for task in ordered_tasks(analysis.shares["task"]):
+        task_shares = analysis.shares[analysis.shares["task"] == task]
         shown = _composition_configs(configs, set(task_shares["config"]))
         if not shown:
             continue
-        figure, axes = _panels(len(shown), f"{task_title(task)}: minibatch composition (median over seeds)",
-                               legend_width=LEGEND_WIDTH)
-        for axis, config in zip(axes, shown):
-            panel = task_shares[task_shares["config"] == config]
-            axis.stackplot(panel["epoch"], *(panel[column] for column in metrics.SHARE_COLUMNS),
-                           labels=[SHARE_STYLE[c][0] for c in metrics.SHARE_COLUMNS],
-                           colors=[SHARE_STYLE[c][1] for c in metrics.SHARE_COLUMNS], alpha=0.8, linewidth=0)
-            axis.set_title(config, fontsize=10)
-            axis.set_ylim(0, 1)
-            if panel["epoch"].max() > panel["epoch"].min():
-                axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
-        _label_outer(axes, "share of the minibatch")
-        _figure_legend(figure, axes[:1], LEGEND_WIDTH, reverse=True, fontsize=9)
+        marked = (metrics.PAPER_COMPOSITION_EPOCH if task == metrics.PAPER_COMPOSITION_TASK
+                  and task_shares["epoch"].max() >= metrics.PAPER_COMPOSITION_EPOCH else None)
         caption = (f"{task_title(task)}: share of each kind of transition in the sampled minibatches, per epoch: real "
                    "transitions whose reward says success (blue) or failure (red), and transitions whose goal was "
-                   "relabelled in hindsight (purple). Median over seeds of each share, rescaled to sum to 1.")
+                   "relabelled in hindsight (purple). Median over seeds of each share, rescaled to sum to 1."
+                   + (f" The black line marks epoch {marked}, where the paper gives HER's composition (table "
+                      "below)." if marked else ""))
         found.append(ReportFigure(f"composition_{task}", f"{task_title(task)}: minibatch composition (Fig. 2)",
-                                  caption, figure))
+                                  caption, partial(_draw_composition, task, task_shares, shown, marked)))
     return found
 
+
+def _draw_composition(task: str, shares: pd.DataFrame, shown: list[str], marked: int | None) -> Figure:
+    titles = [_fitting(config, PANEL_SIZE[0], PANEL_TITLE_SIZE) for config in shown]
+    figure, axes = _panels(len(shown), f"{task_title(task)}: minibatch composition (median over seeds)",
+                           legend_width=LEGEND_WIDTH, title_lines=max(map(_lines, titles)))
+    for axis, config, title in zip(axes, shown, titles):
+        panel = shares[shares["config"] == config]
+        axis.stackplot(panel["epoch"], *(panel[column] for column in metrics.SHARE_COLUMNS),
+                       labels=[SHARE_STYLE[c][0] for c in metrics.SHARE_COLUMNS],
+                       colors=[SHARE_STYLE[c][1] for c in metrics.SHARE_COLUMNS], alpha=0.8, linewidth=0)
+        if marked is not None and panel["epoch"].max() >= marked:
+            axis.axvline(marked, color="black", linewidth=1.0)
+        _set_title(axis, title)
+        axis.set_ylim(0, 1)
+        if panel["epoch"].max() > panel["epoch"].min():
+            axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
+    _label_outer(axes, "share of the minibatch")
+    _figure_legend(figure, axes[:1], LEGEND_WIDTH, reverse=True, fontsize=9)
+    return figure
+
+
+# --- Figs. 4-9: learning curves ----------------------------------------------------------------------------------
 
 def _weights_text(lambda_r: float, lambda_h: float) -> str:
     return f"λr={lambda_r:g}, λh={lambda_h:g}"
 
 
 def _learning_panels(present: pd.DataFrame) -> list[tuple[tuple | None, list[tuple[str, list[str]]]]]:
-    """How to split one task's configs into learning-curve figures.
+    """How to split one task's configs into learning-curve figures: [(weights, [(panel title, configs)])].
 
-    One figure per reward weights (lambda_r, lambda_h) of the decay schedules without MEP,
-    each with a panel per decay kind holding the constant baselines of the same weights and
-    the decays of that kind. Without decays: one figure, one panel, every config.
+    One figure per reward weights (lambda_r, lambda_h) of the non-constant schedules without
+    MEP, each with a panel per schedule kind holding the constant baselines of the same weights
+    and the schedules of that kind. Without those: one figure, one panel, every config.
     """
     plain = present[~present["mep"]]
     decays = plain[plain["schedule"] != "constant"]
@@ -262,9 +326,9 @@ def _learning_panels(present: pd.DataFrame) -> list[tuple[tuple | None, list[tup
         return [(None, [("all configurations", list(present.index))])]
     figures = []
     for weights in weight_groups:
-        same = plain[(plain["lambda_r"] == weights[0]) & (plain["lambda_h"] == weights[1])]
+        same = plain[_has_weights(plain, weights)]
         baselines = list(same.index[same["schedule"] == "constant"])
-        panels = [(DECAY_PANEL_TITLES[kind], baselines + list(same.index[same["schedule"] == kind]))
+        panels = [(KIND_TITLES[kind], baselines + list(same.index[same["schedule"] == kind]))
                   for kind in SCHEDULE_KINDS[1:] if (same["schedule"] == kind).any()]
         figures.append((weights, panels))
     return figures
@@ -287,60 +351,82 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
                 versus = " and ".join(baselines) if baselines else "each other (no constant baseline)"
                 name = f"curves_{task}_lr{weights[0]:g}_lh{weights[1]:g}"
                 title = f"{task_title(task)}: decay schedules vs {versus} ({_weights_text(*weights)})"
-            legend_width = _legend_width(config for _, shown in panels for config in shown)
-            figure, axes = _panels(len(panels), title, legend_width=legend_width)
-            for axis, (panel_title, shown) in zip(axes, panels):
-                for config in shown:
-                    _draw_curve(axis, medians, config, styles[config])
-                axis.set_title(panel_title, fontsize=10)
-                axis.set_ylim(-0.02, 1.02)
-            _label_outer(axes, _success_ylabel(analysis.window))
-            _figure_legend(figure, axes, legend_width)
             caption = (f"{title}. Each seed's test success is smoothed by a trailing {analysis.window}-epoch moving "
                        "average (the first epochs average the epochs so far); lines are the median over seeds, "
                        "shaded bands the range (min to max) over seeds.")
-            found.append(ReportFigure(name, f"{title} (Figs. 4-9)", caption, figure))
+            draw = partial(_draw_learning_curves, title, medians, panels, styles, analysis.window)
+            found.append(ReportFigure(name, f"{title} (Figs. 4-9)", caption, draw))
     return found
 
 
+def _draw_learning_curves(title: str, medians: pd.DataFrame, panels: list[tuple[str, list[str]]],
+                          styles: dict[str, dict], window: int) -> Figure:
+    legend_width = _legend_width(config for _, shown in panels for config in shown)
+    figure, axes = _panels(len(panels), title, legend_width=legend_width)
+    for axis, (panel_title, shown) in zip(axes, panels):
+        for config in shown:
+            _draw_curve(axis, medians, config, styles[config])
+        _set_title(axis, panel_title)
+        axis.set_ylim(-0.02, 1.02)
+    _label_outer(axes, _success_ylabel(window))
+    _figure_legend(figure, axes, legend_width)
+    return figure
+
+
+# --- Fig. 10: mean Q ---------------------------------------------------------------------------------------------
+
 def q_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 10: mean Q over epochs per task, HER against the decay schedules with HER's weights."""
-    q_values = metrics.mean_q(analysis.epochs)
     configs = _config_table(analysis)
-    styles = config_styles(analysis)
-    shown = list(configs.index[(~configs["mep"]) & (configs["lambda_r"] == 1.0) & (configs["lambda_h"] == 1.0)])
-    q_values = q_values[q_values["config"].isin(shown)]
+    shown = list(configs.index[~configs["mep"] & _has_weights(configs, HER_WEIGHTS)])
+    q_values = analysis.q_means[analysis.q_means["config"].isin(shown)]
     if q_values.empty or not (configs.loc[shown, "schedule"] != "constant").any():
         return []
+    caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over seeds, for HER and the "
+               "schedules with the same reward weights (λr = λh = 1); linear decays solid, exponential "
+               "dash-dot. An early overestimate that falls sooner means the critic is corrected sooner.")
+    return [ReportFigure("q_mean", "Mean Q-value during training (Fig. 10)", caption,
+                         partial(_draw_q, q_values, config_styles(analysis)))]
+
+
+def _draw_q(q_values: pd.DataFrame, styles: dict[str, dict]) -> Figure:
     tasks = ordered_tasks(q_values["task"])
     legend_width = _legend_width(q_values["config"].unique())
     figure, axes = _panels(len(tasks), "Mean critic Q(s, a) over training batches (mean over seeds)",
                            legend_width=legend_width, sharey=False)
     for axis, task in zip(axes, tasks):
         for config, curve in q_values[q_values["task"] == task].groupby("config", observed=True):
-            axis.plot(curve["epoch"], curve["q_mean"], label=config, **{**styles[config], "linewidth": 1.1})
-        axis.set_title(task_title(task), fontsize=10)
+            axis.plot(curve["epoch"], curve["q_mean"], label=_legend_label(config),
+                      **{**styles[config], "linewidth": 1.1})
+        _set_title(axis, task_title(task))
     _label_outer(axes, "mean Q(s, a)")
     _figure_legend(figure, axes, legend_width)
-    caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over seeds, for HER and the "
-               "decay schedules with the same reward weights (λr = λh = 1); linear decays solid, exponential "
-               "dash-dot. An early overestimate that falls sooner means the critic is corrected sooner.")
-    return [ReportFigure("q_mean", "Mean Q-value during training (Fig. 10)", caption, figure)]
+    return figure
 
+
+# --- Fig. 11: MEP ------------------------------------------------------------------------------------------------
 
 def mep_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 11: per task, each MEP configuration beside the same configuration without MEP."""
     configs = _config_table(analysis)
-    styles = config_styles(analysis)
     mep_configs = configs[configs["mep"]]
     settings = ["schedule", "eps", "beta1", "beta2", "lambda_r", "lambda_h", "total_epochs"]
     partners = {config for config, row in configs[~configs["mep"]].iterrows()
                 if (mep_configs[settings] == row[settings]).all(axis=1).any()}
     shown = [c for c in configs.index if c in partners or c in mep_configs.index]
     medians = analysis.medians[analysis.medians["config"].isin(shown)]
-    tasks = ordered_tasks(medians.loc[medians["config"].isin(mep_configs.index), "task"])
-    if not tasks:
+    if not medians["config"].isin(mep_configs.index).any():
         return []
+    caption = ("Configurations with MEP (dashed) beside the same configuration without it: median over seeds of "
+               f"the {analysis.window}-epoch moving average of test success, range over seeds shaded.")
+    return [ReportFigure("mep", "MEP comparison (Fig. 11)", caption,
+                         partial(_draw_mep, medians, shown, list(mep_configs.index), config_styles(analysis),
+                                 analysis.window))]
+
+
+def _draw_mep(medians: pd.DataFrame, shown: list[str], mep_configs: list[str], styles: dict[str, dict],
+              window: int) -> Figure:
+    tasks = ordered_tasks(medians.loc[medians["config"].isin(mep_configs), "task"])
     legend_width = _legend_width(shown)
     figure, axes = _panels(len(tasks), "Episode prioritisation (MEP) with and without relabel-rate decay",
                            legend_width=legend_width)
@@ -348,65 +434,87 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
         task_medians = medians[medians["task"] == task]
         for config in [c for c in shown if c in set(task_medians["config"])]:
             _draw_curve(axis, task_medians, config, styles[config])
-        axis.set_title(task_title(task), fontsize=10)
+        _set_title(axis, task_title(task))
         axis.set_ylim(-0.02, 1.02)
-    _label_outer(axes, _success_ylabel(analysis.window))
+    _label_outer(axes, _success_ylabel(window))
     _figure_legend(figure, axes, legend_width)
-    caption = ("Configurations with MEP (dashed) beside the same configuration without it: median over seeds of "
-               f"the {analysis.window}-epoch moving average of test success, range over seeds shaded.")
-    return [ReportFigure("mep", "MEP comparison (Fig. 11)", caption, figure)]
+    return figure
 
+
+# --- Fig. 12: mean relabel rate ----------------------------------------------------------------------------------
 
 def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 12: per task, mu_eps against beta1 for each beta2 present (eq. 10 and 11), the
     optimal band shaded, one marker per decay configuration coloured by its final median success."""
-    configs = _config_table(analysis)
-    summary = analysis.summary.merge(configs.reset_index(), on="config")
+    summary = analysis.summary.merge(_config_table(analysis).reset_index(), on="config")
     decays = summary[summary["schedule"] != "constant"]
-    if decays.empty:
-        return []
-    success_colours = colormaps["viridis"]
-    norm = Normalize(0.0, 1.0)
-    beta2_colours = {beta2: PALETTE[i % len(PALETTE)] for i, beta2 in enumerate(sorted(set(decays["beta2"])))}
-    legend_width = LEGEND_WIDTH + 1.0  # the legend, then the colour bar
+    beta2_colours = {beta2: PALETTE[i % len(PALETTE)]
+                     for i, beta2 in enumerate(sorted(set(decays.loc[decays["schedule"].isin(FIXED_KINDS), "beta2"])))}
     found = []
     for task in ordered_tasks(decays["task"]):
-        points = decays[decays["task"] == task]
-        variants = list(dict.fromkeys(zip(points["lambda_r"], points["lambda_h"], points["mep"])))
-        figure, axes = _panels(len(variants), f"{task_title(task)}: mean relabel rate μ_ε of the decay schedules",
-                               legend_width=legend_width, title_lines=2)
-        for axis, (lambda_r, lambda_h, mep) in zip(axes, variants):
-            group = points[(points["lambda_r"] == lambda_r) & (points["lambda_h"] == lambda_h) & (points["mep"] == mep)]
-            total_epochs = int(group["total_epochs"].mode().iloc[0])
-            axis.axhspan(*OPTIMAL_BAND, color="0.85", zorder=0, label=f"best fixed ε of HER, {OPTIMAL_BAND[0]}-{OPTIMAL_BAND[1]}")
-            for beta2, line in metrics.mean_rate_lines(list(group["beta2"]), total_epochs).groupby("beta2"):
-                axis.plot(line["beta1"], line["exact"], color=beta2_colours[beta2], linewidth=1.4, label=f"β2 = {beta2:g}")
-                axis.plot(line["beta1"], line["approx"], color=beta2_colours[beta2], linewidth=1.0, linestyle=":")
-            axis.scatter(group["beta1"], group["mu_eps"], c=group["final_median"], cmap=success_colours, norm=norm,
-                         s=70, edgecolors="black", linewidths=0.8, zorder=3)
-            baselines = summary[(summary["task"] == task) & (summary["schedule"] == "constant")
-                                & (summary["lambda_r"] == lambda_r) & (summary["lambda_h"] == lambda_h)
-                                & (summary["mep"] == mep)]
-            reference = ", ".join(f"{row.config} {row.final_median:.2f}" for row in baselines.itertuples())
-            axis.set_title(_weights_text(lambda_r, lambda_h) + (", with MEP" if mep else "") + f" (K={total_epochs})"
-                           + (f"\nfinal success of {reference}" if reference else ""), fontsize=9)
-            axis.set_xlim(-0.02, 1.02)
-            axis.set_ylim(0.0, 1.02)
-        _label_outer(axes, "μ_ε (mean relabel rate\nover the K epochs)", xlabel="β1")
-        axes[0].plot([], [], color="black", linewidth=1.4, label="eq. 10: exact mean")
-        axes[0].plot([], [], color="black", linewidth=1.0, linestyle=":", label="eq. 11: 1 − β1/(1 + e^β2)")
-        _figure_legend(figure, axes, legend_width)
-        width, height = figure.get_size_inches()
-        bottom, top = axes[-1].get_position().y0, axes[0].get_position().y1
-        colour_axis = figure.add_axes(((width - 1.0) / width, bottom, 0.15 / width, top - bottom))
-        colourbar = figure.colorbar(ScalarMappable(norm=norm, cmap=success_colours), cax=colour_axis)
-        colourbar.set_label("final median test success")
         caption = (f"{task_title(task)}: mean relabel rate μ_ε over training against β1, one line per β2 of the runs "
                    "(solid: exact mean over K epochs, eq. 10; dotted: continuous approximation, eq. 11). The grey "
-                   "band is the best fixed ε of HER, 0.8 to 0.889. Each marker is one decay configuration, "
-                   "coloured by its final median test success (see the summary table).")
-        found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: μ_ε against β1 (Fig. 12)", caption, figure))
+                   f"band is the best fixed ε of HER, {MU_EPS_BAND[0]} to {MU_EPS_BAND[1]}. Each marker is one decay "
+                   "configuration (diamonds: success-driven rates, at the mean of the rates they logged), coloured "
+                   "by its final median test success (see the summary table).")
+        found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: μ_ε against β1 (Fig. 12)", caption,
+                                  partial(_draw_mean_rate, task, summary[summary["task"] == task], beta2_colours)))
     return found
+
+
+def _mean_rate_panels(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
+    """One panel per (reward weights, MEP) of the decay configurations in ``summary`` (one task's
+    summary rows joined with their configs' settings): [(title, its decay rows)]; the title names
+    the weights, K and the final success of the constant baselines with the same weights."""
+    decays = summary[summary["schedule"] != "constant"]
+    panels = []
+    for lambda_r, lambda_h, mep in dict.fromkeys(zip(decays["lambda_r"], decays["lambda_h"], decays["mep"])):
+        same = _has_weights(summary, (lambda_r, lambda_h)) & (summary["mep"] == mep)
+        group = summary[same & (summary["schedule"] != "constant")]
+        baselines = summary[same & (summary["schedule"] == "constant")]
+        reference = ", ".join(f"{row.config} {row.final_median:.2f}" for row in baselines.itertuples())
+        title = (_weights_text(lambda_r, lambda_h) + (", with MEP" if mep else "")
+                 + f" (K={int(group['total_epochs'].mode().iloc[0])})"
+                 + (f"; final success of {reference}" if reference else ""))
+        panels.append((_fitting(title, PANEL_SIZE[0], 9), group))
+    return panels
+
+
+def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float, tuple]) -> Figure:
+    panels = _mean_rate_panels(summary)
+    legend_width = LEGEND_WIDTH + 1.0  # the legend, then the colour bar
+    figure, axes = _panels(len(panels), f"{task_title(task)}: mean relabel rate μ_ε of the decay schedules",
+                           legend_width=legend_width, title_lines=max(_lines(title) for title, _ in panels))
+    norm = Normalize(0.0, 1.0)
+    for axis, (title, group) in zip(axes, panels):
+        _mean_rate_panel(axis, group, beta2_colours, norm)
+        _set_title(axis, title, fontsize=9)
+    _label_outer(axes, "μ_ε (mean relabel rate\nover the K epochs)", xlabel="β1")
+    axes[0].plot([], [], color="black", linewidth=1.4, label="eq. 10: exact mean")
+    axes[0].plot([], [], color="black", linewidth=1.0, linestyle=":", label="eq. 11: 1 − β1/(1 + e^β2)")
+    _figure_legend(figure, axes, legend_width)
+    width, _ = figure.get_size_inches()
+    bottom, top = axes[-1].get_position().y0, axes[0].get_position().y1
+    colour_axis = figure.add_axes(((width - 1.0) / width, bottom, 0.15 / width, top - bottom))
+    figure.colorbar(ScalarMappable(norm=norm, cmap=colormaps["viridis"]), cax=colour_axis,
+                    label="final median test success")
+    return figure
+
+
+def _mean_rate_panel(axis, group: pd.DataFrame, beta2_colours: dict[float, tuple], norm: Normalize) -> None:
+    """The optimal band, the eq. 10/11 lines of each beta2 of ``group``'s fixed decays, and one
+    marker per configuration of ``group`` at (beta1, mu_eps)."""
+    total_epochs = int(group["total_epochs"].mode().iloc[0])
+    axis.axhspan(*MU_EPS_BAND, color="0.85", zorder=0, label=f"best fixed ε of HER, {MU_EPS_BAND[0]}-{MU_EPS_BAND[1]}")
+    fixed = group["schedule"].isin(FIXED_KINDS)
+    for beta2, line in metrics.mean_rate_lines(list(group.loc[fixed, "beta2"]), total_epochs).groupby("beta2"):
+        axis.plot(line["beta1"], line["exact"], color=beta2_colours[beta2], linewidth=1.4, label=f"β2 = {beta2:g}")
+        axis.plot(line["beta1"], line["approx"], color=beta2_colours[beta2], linewidth=1.0, linestyle=":")
+    for marker, points in (("o", group[fixed]), ("D", group[~fixed])):
+        axis.scatter(points["beta1"], points["mu_eps"], c=points["final_median"], cmap=colormaps["viridis"],
+                     norm=norm, marker=marker, s=70, edgecolors="black", linewidths=0.8, zorder=3)
+    axis.set_xlim(-0.02, 1.02)
+    axis.set_ylim(0.0, 1.02)
 
 
 FIGURE_BUILDERS: list[Callable[[Analysis], list[ReportFigure]]] = [
@@ -420,5 +528,5 @@ FIGURE_BUILDERS: list[Callable[[Analysis], list[ReportFigure]]] = [
 
 
 def all_figures(analysis: Analysis) -> list[ReportFigure]:
-    """Every figure the data allows, in report order."""
+    """Every figure the data allows, in report order (not drawn yet: call each one's ``draw()``)."""
     return [figure for build in FIGURE_BUILDERS for figure in build(analysis)]

@@ -1,6 +1,7 @@
 """Run logs -> tidy tables.
 
-:func:`load_runs` reads every ``run.mcap`` below a folder into a :class:`RunTable`:
+:func:`load_runs` reads every ``run.mcap`` below a folder (in worker processes, one per core,
+when there are many: :func:`start_reading`) into a :class:`RunTable`:
 
 - ``runs``: one row per run (columns: :data:`RUN_COLUMNS`);
 - ``epochs``: one row per run x completed epoch: the run's columns, then every field of
@@ -15,16 +16,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, NamedTuple
 
 import numpy as np
 import pandas as pd
 
-from hersd.config import ScheduleConfig
+from analysis.workers import ForkedMap
+from hersd.config import AlgoConfig, ScheduleConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, RunLogError, read_records
-from hersd.runstore import NOT_HASHED
-from hersd.schedules import SCHEDULE_KINDS, schedule_mean_rate
-from hersd.tasks import task_rank
+from hersd.runstore import HASHED_UNLESS, NOT_HASHED
+from hersd.schedules import SCHEDULE_KINDS, effective_beta2, schedule_mean_rate
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
@@ -32,8 +33,9 @@ RUN_COLUMNS = (
     "config",         # configuration label (ordered categorical, see config_label)
     "algo",           # config.algo.name
     "learner",        # config.learner.name: ddpg (the paper's and every run before learners were a setting) | td3 | sac
-    "schedule",       # config.schedule.kind: constant | linear | exponential
-    "eps", "beta1", "beta2",
+    "schedule",       # config.schedule.kind: one of hersd.schedules.SCHEDULE_KINDS
+    "eps", "beta1",
+    "beta2",          # the beta2 of eq. 9 in effect: 0 for linear schedules (hersd.schedules.effective_beta2)
     "lambda_r", "lambda_h",
     "mep",            # config.algo.mep.enabled
     "seed",
@@ -47,12 +49,18 @@ RUN_COLUMNS = (
 )
 
 # Config fields that change neither what a run computes nor which configuration it belongs to.
-_NOT_CONFIGURATION = ("seed", *NOT_HASHED)
-_SCHEDULE_ORDER = {kind: rank for rank, kind in enumerate(SCHEDULE_KINDS)}
+NOT_CONFIGURATION = ("seed", *NOT_HASHED)
+# The baselines the labels name: HER's relabel rate (the schedule's default), HER's and ARCHER's
+# reward weights (lambda_r, lambda_h); ARCHER halves hindsight rewards (conf/algo/archer.yaml).
+HER_EPS = ScheduleConfig().eps
+HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
+ARCHER_WEIGHTS = (1.0, 0.5)
+PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
+READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
 
 
 class ReportInputError(ValueError):
-    """The input cannot make a report (no logs, nothing readable, filters match nothing)."""
+    """The input cannot make a report (no logs, nothing readable, filters match nothing, a bad storage)."""
 
 
 @dataclass
@@ -62,6 +70,11 @@ class RunTable:
     runs: pd.DataFrame
     epochs: pd.DataFrame
     skipped: list[str] = field(default_factory=list)
+
+
+def schedule_rank(kind: str) -> int:
+    """Sort key of a schedule kind: its place in hersd.schedules.SCHEDULE_KINDS, unknown kinds last."""
+    return SCHEDULE_KINDS.index(kind) if kind in SCHEDULE_KINDS else len(SCHEDULE_KINDS)
 
 
 def schedule_label(schedule: str, eps: float, beta1: float, beta2: float) -> str:
@@ -79,32 +92,30 @@ def config_label(schedule: str, eps: float, beta1: float, beta2: float,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
     than the paper's DDPG lead the label).
 
-    Constant schedules are HER (lambda_r = lambda_h = 1) or ARCHER (lambda_r = 1,
-    lambda_h = 0.5), with ``eps=`` appended when eps != 0.8; other reward weights are
-    appended as ``λr=`` / ``λh=``.
+    Constant schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
+    appended when eps != HER_EPS; other reward weights are appended as ``λr=`` / ``λh=``.
     """
-    weights = (1.0, 1.0), (1.0, 0.5)
     if schedule == "constant":
-        name = "ARCHER" if (lambda_r, lambda_h) == weights[1] else "HER"
-        qualifiers = [f"eps={eps:g}"] if eps != 0.8 else []
-        if (lambda_r, lambda_h) in weights:
-            lambda_r = lambda_h = 1.0  # already said by the name
+        name = "ARCHER" if (lambda_r, lambda_h) == ARCHER_WEIGHTS else "HER"
+        qualifiers = [f"eps={eps:g}"] if eps != HER_EPS else []
+        if (lambda_r, lambda_h) in (HER_WEIGHTS, ARCHER_WEIGHTS):
+            lambda_r, lambda_h = HER_WEIGHTS  # already said by the name
     else:
         name, qualifiers = schedule_label(schedule, eps, beta1, beta2), []
-    if lambda_r != 1.0:
+    if lambda_r != HER_WEIGHTS[0]:
         qualifiers.append(f"λr={lambda_r:g}")
-    if lambda_h != 1.0:
+    if lambda_h != HER_WEIGHTS[1]:
         qualifiers.append(f"λh={lambda_h:g}")
     prefix = [] if learner == "ddpg" else [learner.upper()]
     return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
 
 
 def _config_order(run: dict[str, Any]) -> tuple:
-    """Sort key: HER, ARCHER and other constants first, then linear, then exponential."""
-    baseline_rank = 0 if (run["lambda_r"], run["lambda_h"]) == (1.0, 1.0) else 1
-    return (run["learner"] != "ddpg", run["learner"], _SCHEDULE_ORDER.get(run["schedule"], len(SCHEDULE_KINDS)),
-            run["mep"], baseline_rank, run["lambda_r"],
-            -run["lambda_h"], run["eps"], run["beta1"], run["beta2"])
+    """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success
+    (SCHEDULE_KINDS); MEP after plain; HER's weights first; then by eps, beta1, beta2."""
+    weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
+    return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
+            run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"])
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -137,6 +148,15 @@ def _distinguish(labels: list[str], settings: list[dict[str, Any]], groups: list
     return new_labels
 
 
+class ReadLog(NamedTuple):
+    """One readable log: ``row`` its RUN_COLUMNS values (but run and config), ``settings`` the dotted
+    config fields that define its configuration, ``columns`` EPOCH_FIELDS name -> array of shape (epochs,)."""
+
+    row: dict[str, Any]
+    settings: dict[str, Any]
+    columns: dict[str, np.ndarray]
+
+
 def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """One run's columns from its metadata, and its configuration-defining settings."""
     config = meta["config"]
@@ -148,7 +168,7 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
         "schedule": schedule.kind,
         "eps": float(schedule.eps),
         "beta1": float(schedule.beta1),
-        "beta2": float(schedule.beta2),
+        "beta2": effective_beta2(schedule.kind, schedule.beta2),
         "lambda_r": float(config["algo"]["lambda_r"]),
         "lambda_h": float(config["algo"]["lambda_h"]),
         "mep": bool(config["algo"]["mep"]["enabled"]),
@@ -157,8 +177,8 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
         "mu_eps": schedule_mean_rate(schedule, int(config["epochs"])),
         "run_id": str(meta["run_id"]),
     }
-    settings = {key: value for key, value in _flatten(config).items()
-                if key not in _NOT_CONFIGURATION}
+    settings = {**HASHED_UNLESS, **{key: value for key, value in _flatten(config).items()
+                                    if key not in NOT_CONFIGURATION}}  # fields older logs lack: their value then
     return row, settings
 
 
@@ -169,9 +189,72 @@ def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:
             for name, (kind, _) in EPOCH_FIELDS.items()}
 
 
+def read_log(path: Path, folder: Path) -> ReadLog | str:
+    """One log -> :class:`ReadLog`, or the line saying why it was skipped (``"<path>: <reason>"``,
+    the path relative to ``folder``). A damaged log gives the epochs written before the damage."""
+    shown = path.relative_to(folder).as_posix()
+    try:
+        log = read_records(path)
+        row, settings = _run_row(log.meta)
+    except RunLogError as err:
+        return f"{shown}: {str(err).removeprefix(f'{path}: ')}"
+    except (KeyError, TypeError, ValueError) as err:
+        return f"{shown}: run metadata lacks or mistypes a config field ({err})"
+    row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
+    columns = _epoch_columns(log.records)
+    if row["schedule"] == "success" and log.records:  # placed by the rate it realised
+        row["mu_eps"] = float(np.mean(columns["relabel_rate"]))
+    return ReadLog(row, settings, columns)
+
+
 def find_logs(folder: Path) -> list[Path]:
     """Every run log below ``folder``, in path order."""
     return sorted(Path(folder).rglob(LOG_NAME))
+
+
+class LogReading:
+    """The logs below a folder, being read (see :func:`start_reading`)."""
+
+    def __init__(self, folder: Path, paths: list[Path]) -> None:
+        self.folder, self.paths = folder, paths
+        # Strided batches mix tasks and schedules, so each takes about as long as the others.
+        parallel = len(paths) >= PARALLEL_FROM
+        self._batches = [paths[i::READ_BATCHES] for i in range(READ_BATCHES)] if parallel else [paths]
+        self._reading = ForkedMap(self._read_batch, self._batches)
+
+    def _read_batch(self, paths: list[Path]) -> list[ReadLog | str]:
+        return [read_log(path, self.folder) for path in paths]
+
+    def result(self, tasks: Iterable[str] | None = None, algos: Iterable[str] | None = None) -> RunTable:
+        """Wait for the logs and make the tables: see :func:`load_runs`."""
+        by_path = {path: log for batch, logs in zip(self._batches, self._reading.results())
+                   for path, log in zip(batch, logs)}
+        logs = [by_path[path] for path in self.paths]
+        readable = [log for log in logs if isinstance(log, ReadLog)]
+        if not readable:
+            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable")
+        kept = [log for log in readable
+                if (tasks is None or log.row["task"] in tasks) and (algos is None or log.row["algo"] in algos)]
+        if not kept:
+            found_tasks = sorted({log.row["task"] for log in readable})
+            found_algos = sorted({log.row["algo"] for log in readable})
+            raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
+                                   f"algos present: {', '.join(found_algos)})")
+        return _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
+
+
+def start_reading(folder: str | Path) -> LogReading:
+    """Start reading every ``run.mcap`` below ``folder``: in worker processes, one per core, when
+    there are PARALLEL_FROM or more, so the caller can do other work meanwhile (the report imports
+    its drawing modules); ``.result(tasks, algos)`` waits and gives the :class:`RunTable`.
+    Raises :class:`ReportInputError` when the folder has no logs."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ReportInputError(f"{folder} is not a folder")
+    paths = find_logs(folder)
+    if not paths:
+        raise ReportInputError(f"no {LOG_NAME} files under {folder}")
+    return LogReading(folder, paths)
 
 
 def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
@@ -182,64 +265,28 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
     in ``skipped``. ``tasks`` / ``algos`` keep only runs whose config.task.name /
     config.algo.name is listed. Raises :class:`ReportInputError` when nothing is left.
     """
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise ReportInputError(f"{folder} is not a folder")
-    paths = find_logs(folder)
-    if not paths:
-        raise ReportInputError(f"no {LOG_NAME} files under {folder}")
-    rows: list[dict[str, Any]] = []
-    settings: list[dict[str, Any]] = []
-    records: list[list[dict[str, Any]]] = []
-    skipped: list[str] = []
-    for path in paths:
-        shown = path.relative_to(folder).as_posix()
-        try:
-            log = read_records(path)
-            row, run_settings = _run_row(log.meta)
-        except RunLogError as err:
-            skipped.append(f"{shown}: {str(err).removeprefix(f'{path}: ')}")
-            continue
-        except (KeyError, TypeError, ValueError) as err:
-            skipped.append(f"{shown}: run metadata lacks or mistypes a config field ({err})")
-            continue
-        row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
-        if row["schedule"] == "success" and log.records:  # placed by the rate it realised
-            row["mu_eps"] = float(np.mean([record["relabel_rate"] for record in log.records]))
-        rows.append(row)
-        settings.append(run_settings)
-        records.append(log.records)
-    if not rows:
-        raise ReportInputError(f"none of the {len(paths)} {LOG_NAME} files under {folder} is readable")
+    return start_reading(folder).result(tasks, algos)
 
-    keep = [i for i, row in enumerate(rows)
-            if (tasks is None or row["task"] in tasks) and (algos is None or row["algo"] in algos)]
-    if not keep:
-        found_tasks = sorted({row["task"] for row in rows})
-        found_algos = sorted({row["algo"] for row in rows})
-        raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
-                               f"algos present: {', '.join(found_algos)})")
-    rows = [rows[i] for i in keep]
-    settings = [settings[i] for i in keep]
-    records = [records[i] for i in keep]
 
+def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
+    """The runs and epochs tables of readable logs: labels told apart, configs ordered."""
+    rows = [dict(log.row) for log in logs]
     labels = [config_label(r["schedule"], r["eps"], r["beta1"], r["beta2"], r["lambda_r"], r["lambda_h"], r["mep"],
                            r["learner"]) for r in rows]
     # Within a task, seeds of one label must share every setting; where they do not, say what
     # differs. Across tasks a label may differ in budget (epochs, cycles): tasks are strata.
-    labels = _distinguish(labels, settings, [(r["task"], label) for r, label in zip(rows, labels)])
+    groups = [(row["task"], label) for row, label in zip(rows, labels)]
+    labels = _distinguish(labels, [log.settings for log in logs], groups)
     for row, label in zip(rows, labels):
         row["config"] = label
-
     order = sorted({row["config"]: row for row in rows}.values(), key=lambda r: (_config_order(r), r["config"]))
     runs = pd.DataFrame.from_records(rows)
     runs.insert(0, "run", range(len(runs)))
     runs = runs[list(RUN_COLUMNS)]
     runs["config"] = pd.Categorical(runs["config"], categories=[r["config"] for r in order], ordered=True)
 
-    run_of_row = runs["run"].to_numpy().repeat([len(run_records) for run_records in records])
+    run_of_row = runs["run"].to_numpy().repeat([row["epochs_done"] for row in rows])
     epochs = runs.take(run_of_row).reset_index(drop=True)
-    for name, values in _epoch_columns([record for run_records in records for record in run_records]).items():
-        epochs[name] = values
+    for name in EPOCH_FIELDS:
+        epochs[name] = np.concatenate([log.columns[name] for log in logs])
     return RunTable(runs=runs, epochs=epochs, skipped=skipped)
-

@@ -17,11 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
-from analysis.load import schedule_label
+from analysis.load import HER_EPS, HER_WEIGHTS, schedule_label, schedule_rank
 from hersd.config import ScheduleConfig
-from hersd.schedules import FIXED_KINDS, SCHEDULE_KINDS, mean_rate_approx, mean_rate_exact, relabel_rate
+from hersd.schedules import FIXED_KINDS, decay_rate, mean_rate_approx, relabel_rate
 from hersd.tasks import task_rank
 
 GROUP = ["task", "config"]
@@ -31,6 +30,11 @@ BOOTSTRAP_SEED = 0
 BOOTSTRAP_RESAMPLES = 2000
 CONFIDENCE = 0.95
 SHARE_COLUMNS = ("share_real_success", "share_real_failure", "share_hindsight")
+# The seed paper's Fig. 2 numbers (its Sec. III text): FetchPush, HER (eps = 0.8), the minibatch
+# at epoch 150 holds 5.3 % successful real, 80 % hindsight and 14.7 % unsuccessful real transitions.
+PAPER_COMPOSITION_TASK = "push"
+PAPER_COMPOSITION_EPOCH = 150
+PAPER_COMPOSITION = {"share_real_success": 0.053, "share_hindsight": 0.80, "share_real_failure": 0.147}
 
 
 def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
@@ -79,6 +83,8 @@ def first_epoch_reaching(epoch: np.ndarray, values: np.ndarray, threshold: float
 
 def interquartile_mean(values: np.ndarray) -> float:
     """Mean of the middle 50 %: scipy.stats.trim_mean(values, 0.25)."""
+    from scipy import stats  # scipy.stats takes most of a second to import: only when computing
+
     return float(stats.trim_mean(np.asarray(values, dtype=float), 0.25))
 
 
@@ -92,6 +98,8 @@ def iqm_interval(strata: list[np.ndarray], seed: int = BOOTSTRAP_SEED,
     NaNs when no stratum has two seeds. The generator is ``np.random.default_rng(seed)``,
     so the same input always gives the same interval.
     """
+    from scipy import stats
+
     strata = [np.asarray(values, dtype=float) for values in strata]
     resampled = [values for values in strata if len(values) >= 2]
     fixed = np.concatenate([values for values in strata if len(values) < 2] or [np.empty(0)])
@@ -117,28 +125,42 @@ def probability_of_improvement(candidate: np.ndarray, baseline: np.ndarray) -> f
     return float(np.mean((x > y) + 0.5 * (x == y)))
 
 
-def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, baseline: str = BASELINE,
-                  seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+def her_baselines(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
+    """(task, config) -> the configuration its probability of improvement compares with: the
+    HER configuration (constant HER_EPS, HER's reward weights, no MEP) of the same task, learner
+    and K. Left out when there is none, or more than one (they differ in other settings)."""
+    setup = ["task", "learner", "total_epochs"]
+    her = runs[(runs["schedule"] == "constant") & (runs["eps"] == HER_EPS) & (runs["lambda_r"] == HER_WEIGHTS[0])
+               & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"].astype(bool)]
+    her_configs = {key: set(group["config"].astype(str)) for key, group in her.groupby(setup, observed=True)}
+    baselines = {}
+    for (task, config), group in runs.groupby(GROUP, observed=True):
+        setups = set(group[setup].itertuples(index=False, name=None))
+        candidates = her_configs.get(setups.pop(), set()) if len(setups) == 1 else set()
+        if len(candidates) == 1:
+            (baselines[(task, config)],) = candidates
+    return baselines
+
+
+def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
     """One row per (task, config).
 
     Columns: task, config, seeds, complete (runs that finished), horizon, final_median
     (median over seeds of final success), auc (mean over epochs 1..horizon of the median
     curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve reaches it, NaN if
     never), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap interval),
-    p_improve_<baseline> (probability of improvement on the baseline's seeds; NaN if the
-    task has no baseline).
+    p_improve_HER (probability of improvement on the seeds of its :func:`her_baselines` HER
+    configuration; NaN without one).
     """
-    medians = median_curves(curves)
-    finals = final_success(curves)
+    baselines = her_baselines(runs)
+    finals = {key: group["final"].to_numpy() for key, group in final_success(curves).groupby(GROUP, observed=True)}
     horizon = horizons(curves)
     complete = runs.groupby(GROUP, observed=True)["complete"].sum()
-    baseline_finals = {task: group["final"].to_numpy()
-                       for (task, config), group in finals.groupby(GROUP, observed=True) if config == baseline}
     rows = []
-    for (task, config), median in medians.groupby(GROUP, observed=True, sort=True):
+    for (task, config), median in median_curves(curves).groupby(GROUP, observed=True, sort=True):
         last = horizon[(task, config)]
         median = median[median["epoch"] <= last]
-        final = finals[(finals["task"] == task) & (finals["config"] == config)]["final"].to_numpy()
+        final = finals[(task, config)]
         low, high = iqm_interval([final], seed=seed)
         row = {
             "task": task, "config": config, "seeds": len(final), "complete": int(complete[(task, config)]),
@@ -149,8 +171,9 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, baseline: str = BASE
             row[f"epochs_to_{threshold:g}"] = first_epoch_reaching(median["epoch"].to_numpy(),
                                                                   median["median"].to_numpy(), threshold)
         row.update(iqm=interquartile_mean(final), iqm_low=low, iqm_high=high)
-        row[f"p_improve_{baseline}"] = (probability_of_improvement(final, baseline_finals[task])
-                                        if task in baseline_finals else float("nan"))
+        baseline = baselines.get((task, config))
+        row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
+                                        if (task, baseline) in finals else float("nan"))
         rows.append(row)
     table = pd.DataFrame.from_records(rows)
     for threshold in SUCCESS_THRESHOLDS:
@@ -160,13 +183,14 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, baseline: str = BASE
     return table.sort_values(["task_rank", "config"]).drop(columns="task_rank").reset_index(drop=True)
 
 
-def aggregate_table(curves: pd.DataFrame, baseline: str = BASELINE, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
     """One row per config, across the tasks it was run on.
 
     Columns: config, tasks, seeds, iqm (IQM of the pooled final successes), iqm_low,
-    iqm_high (bootstrap stratified by task), p_improve_<baseline> (mean over the tasks
-    that have both the config and the baseline of the per-task probability).
+    iqm_high (bootstrap stratified by task), p_improve_HER (mean over the tasks where the
+    config has a :func:`her_baselines` HER configuration of the per-task probability).
     """
+    baselines = her_baselines(runs)
     finals = final_success(curves)
     per_task = {key: group["final"].to_numpy() for key, group in finals.groupby(GROUP, observed=True)}
     rows = []
@@ -174,22 +198,47 @@ def aggregate_table(curves: pd.DataFrame, baseline: str = BASELINE, seed: int = 
         tasks = list(dict.fromkeys(group["task"]))
         strata = [per_task[(task, config)] for task in tasks]
         low, high = iqm_interval(strata, seed=seed)
-        improvements = [probability_of_improvement(per_task[(task, config)], per_task[(task, baseline)])
-                        for task in tasks if (task, baseline) in per_task]
+        improvements = [probability_of_improvement(per_task[(task, config)], per_task[(task, baselines[(task, config)])])
+                        for task in tasks if (task, baselines.get((task, config))) in per_task]
         rows.append({"config": config, "tasks": len(tasks), "seeds": int(sum(len(s) for s in strata)),
                      "iqm": interquartile_mean(np.concatenate(strata)), "iqm_low": low, "iqm_high": high,
-                     f"p_improve_{baseline}": float(np.mean(improvements)) if improvements else float("nan")})
+                     f"p_improve_{BASELINE}": float(np.mean(improvements)) if improvements else float("nan")})
     return pd.DataFrame.from_records(rows)
 
 
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:
-    """Per (task, config, epoch): the median over seeds of each minibatch share (SHARE_COLUMNS).
-
-    The three medians are rescaled to sum to 1 so they stack to the whole minibatch.
-    """
-    shares = epochs.groupby([*GROUP, "epoch"], observed=True)[list(SHARE_COLUMNS)].median()
+    """Per (task, config, epoch): the median over seeds of each minibatch share (SHARE_COLUMNS),
+    rescaled so the three sum to 1 (they stack to the whole minibatch), and n_seeds."""
+    grouped = epochs.groupby([*GROUP, "epoch"], observed=True)
+    shares = grouped[list(SHARE_COLUMNS)].median()
     total = shares.sum(axis=1).replace(0.0, np.nan)
-    return shares.div(total, axis=0).reset_index()
+    shares = shares.div(total, axis=0)
+    shares["n_seeds"] = grouped.size()
+    return shares.reset_index()
+
+
+def composition_versus_paper(shares: pd.DataFrame, runs: pd.DataFrame, task: str = PAPER_COMPOSITION_TASK,
+                             epoch: int = PAPER_COMPOSITION_EPOCH) -> pd.DataFrame:
+    """The paper's Fig. 2 composition (HER on FetchPush at epoch 150) beside this data's.
+
+    ``shares``: :func:`composition`; ``runs``: the run table. One row for the paper, then one per
+    HER configuration of ``task`` (constant HER_EPS, HER's reward weights, no MEP, DDPG) with
+    seeds at ``epoch``. Columns: source, config, seeds (that reached the epoch), epoch, then
+    share_real_success, share_hindsight, share_real_failure (the paper's order). Empty when no
+    such run reached the epoch.
+    """
+    her = runs[(runs["task"] == task) & (runs["schedule"] == "constant") & (runs["eps"] == HER_EPS)
+               & (runs["lambda_r"] == HER_WEIGHTS[0]) & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"]
+               & (runs["learner"] == "ddpg")]
+    ours = shares[(shares["task"] == task) & (shares["epoch"] == epoch) & shares["config"].isin(her["config"])]
+    columns = ["source", "config", "seeds", "epoch", *PAPER_COMPOSITION]
+    if ours.empty:
+        return pd.DataFrame(columns=columns)
+    paper = pd.DataFrame([{"source": "paper (Fig. 2)", "config": BASELINE, "seeds": pd.NA, "epoch": epoch,
+                           **PAPER_COMPOSITION}])
+    ours = ours.assign(source="hersd", config=ours["config"].astype(str), seeds=ours["n_seeds"])
+    table = pd.concat([paper, ours], ignore_index=True)[columns]
+    return table.astype({"seeds": "Int64", "epoch": "int64"})
 
 
 def mean_q(epochs: pd.DataFrame) -> pd.DataFrame:
@@ -207,7 +256,7 @@ def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
     """
     settings = ["schedule", "eps", "beta1", "beta2", "total_epochs"]
     distinct = runs.loc[runs["schedule"].isin(FIXED_KINDS), settings].drop_duplicates()
-    distinct = distinct.assign(order=distinct["schedule"].map({kind: i for i, kind in enumerate(SCHEDULE_KINDS)}))
+    distinct = distinct.assign(order=distinct["schedule"].map(schedule_rank))
     frames = []
     for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "total_epochs"]).itertuples(index=False):
         schedule = ScheduleConfig(kind=run.schedule, eps=run.eps, beta1=run.beta1, beta2=run.beta2)
@@ -216,18 +265,22 @@ def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
             "label": schedule_label(run.schedule, run.eps, run.beta1, run.beta2), "schedule": run.schedule,
             "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2, "total_epochs": run.total_epochs,
             "epoch": k, "eps": [relabel_rate(schedule, int(i), run.total_epochs) for i in k]}))
-    return pd.concat(frames, ignore_index=True)
+    columns = ["label", "schedule", "eps_setting", "beta1", "beta2", "total_epochs", "epoch", "eps"]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
 
 
 def mean_rate_lines(beta2_values: list[float], total_epochs: int, points: int = 101) -> pd.DataFrame:
     """mu_eps over beta1 in [0, 1] for each beta2: eq. 10 (``exact``, with K = total_epochs)
-    and eq. 11 (``approx``). Columns beta2, beta1, exact, approx."""
+    and eq. 11 (``approx``). Columns beta2, beta1, exact, approx; ``points`` rows per beta2."""
     beta1 = np.linspace(0.0, 1.0, points)
+    k = np.arange(1, total_epochs + 1)
+    # eq. 10 is linear in beta1: 1 - beta1 * mean_k (k/K)^exp(beta2) = 1 - beta1 * (1 - eps(k) at beta1 = 1).
     frames = [pd.DataFrame({"beta2": beta2, "beta1": beta1,
-                            "exact": [mean_rate_exact(b1, beta2, total_epochs) for b1 in beta1],
+                            "exact": 1.0 - beta1 * float(np.mean(1.0 - decay_rate(k, total_epochs, 1.0, beta2))),
                             "approx": mean_rate_approx(beta1, beta2)})
               for beta2 in sorted(set(beta2_values))]
-    return pd.concat(frames, ignore_index=True)
+    columns = ["beta2", "beta1", "exact", "approx"]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
 
 
 @dataclass
@@ -235,8 +288,9 @@ class Analysis:
     """Everything the figures and the report draw from.
 
     runs / epochs: the tables of :mod:`analysis.load`; curves: :func:`smoothed_curves`;
-    medians: :func:`median_curves`; summary / aggregate: the two tables; window: the
-    smoothing window in epochs.
+    medians: :func:`median_curves`; summary / aggregate: the two tables; shares:
+    :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
+    :func:`composition_versus_paper`; window: the smoothing window in epochs.
     """
 
     runs: pd.DataFrame
@@ -245,12 +299,17 @@ class Analysis:
     medians: pd.DataFrame
     summary: pd.DataFrame
     aggregate: pd.DataFrame
+    shares: pd.DataFrame
+    q_means: pd.DataFrame
+    composition_vs_paper: pd.DataFrame
     window: int
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
     """Compute every table the report needs (runs without a completed epoch are left out)."""
     curves = smoothed_curves(epochs, window)
+    shares = composition(epochs)
     return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(curves),
                     summary=summary_table(curves, runs[runs["epochs_done"] > 0], seed=seed),
-                    aggregate=aggregate_table(curves, seed=seed), window=window)
+                    aggregate=aggregate_table(curves, runs, seed=seed), shares=shares, q_means=mean_q(epochs),
+                    composition_vs_paper=composition_versus_paper(shares, runs), window=window)

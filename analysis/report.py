@@ -1,14 +1,18 @@
-"""``hersd-report FOLDER``: run logs -> tables, figures and one self-contained HTML page.
+"""``hersd-report FOLDER``: run logs (and Optuna studies) -> tables, figures and one self-contained HTML page.
 
 Output (``<FOLDER>/report`` unless ``--out``)::
 
-    index.html                  tables, figures (embedded) and the list of runs
-    figures/<name>.<format>     every figure
-    tables/summary.csv|.md      per task x configuration
-    tables/aggregate.csv|.md    per configuration across tasks
-    tables/runs.csv             the runs behind them
+    index.html                   tables, figures (embedded) and the list of runs
+    figures/<name>.<format>      every figure
+    tables/summary.csv|.md       per task x configuration
+    tables/aggregate.csv|.md     per configuration across tasks
+    tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
+    tables/runs.csv              the runs behind them
+    search/<study>_*             each Optuna study's beta-plane figure and best trials
 
-Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2.
+Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
+are read, and the figures drawn, in worker processes, one per core (analysis.workers); the
+modules that compute and draw (scipy, matplotlib) are imported while the logs are read.
 """
 
 from __future__ import annotations
@@ -17,23 +21,31 @@ import argparse
 import base64
 import html
 import io
-import math
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import pandas as pd
 
-from analysis.figures import ReportFigure, all_figures
-from analysis.load import ReportInputError, load_runs
-from analysis.metrics import analyse
+from analysis.load import ReportInputError, RunTable, start_reading
+from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK
+from analysis.studies import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
+from analysis.tables import html_table, markdown_table
+from analysis.workers import ForkedMap
+from hersd.tasks import task_title
+
+if TYPE_CHECKING:
+    from analysis.figures import ReportFigure
+    from analysis.metrics import Analysis
+    from analysis.search_figures import StudySummary
 
 DEFAULT_WINDOW = 50
 FORMATS = ("png", "svg", "pdf")
 DPI = 100
-FAST_PNG = {"compress_level": 1}  # zlib level 1: ~15 % larger files, a tenth of the figure stage faster
+FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
+MIME = {"png": "image/png", "svg": "image/svg+xml"}
 RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "epochs_done", "total_epochs", "complete", "damaged", "run_id"]
 TABLE_NOTES = {
     "summary": ("One row per task and configuration. <b>final_median</b>: median over seeds of each seed's "
@@ -42,16 +54,27 @@ TABLE_NOTES = {
                 "<b>epochs_to_0.5 / 0.9</b>: first epoch the median smoothed curve reaches 0.5 / 0.9 (empty: never). "
                 "<b>iqm</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
                 "interval [iqm_low, iqm_high] (seeded, 2000 resamples). <b>p_improve_HER</b>: P(X &gt; Y) + "
-                "0.5 P(X = Y) for X a seed's final success and Y a HER seed's, over all pairs."),
+                "0.5 P(X = Y) for X a seed's final success and Y a seed's of HER (eps = 0.8, no MEP) with the same "
+                "learner and number of epochs K, over all pairs."),
     "aggregate": ("One row per configuration across the tasks it was run on: IQM of all its seeds' final "
                   "success; the bootstrap resamples seeds within each task (stratified); p_improve_HER is the "
                   "mean over tasks of the per-task probability of improvement."),
+    "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
+                    f"{task_title(PAPER_COMPOSITION_TASK)} with HER: the paper's numbers (Fig. 2, Sec. III) beside "
+                    f"this data's median over the seeds that reached epoch {PAPER_COMPOSITION_EPOCH}, rescaled to "
+                    "sum to 1, as drawn in the figure above (black line)."),
 }
+PAGE_STYLE = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:1em}"
+              "table.data{border-collapse:collapse;font-size:0.85em}"
+              "table.data td,table.data th{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}"
+              "table.data td.text{text-align:left;max-width:30em;overflow-wrap:anywhere}"
+              "img{max-width:100%}figure{margin:2em 0}figcaption{color:#333;max-width:60em}")
 
 
 @dataclass
 class ReportResult:
-    """What a report run wrote, and the seconds spent per stage (load, metrics, figures, html)."""
+    """What a report run wrote, and the seconds spent per stage: load (which includes ``imports``,
+    done while worker processes read the logs when there are many), metrics, figures, writing."""
 
     index: Path
     figures: list[Path]
@@ -59,27 +82,65 @@ class ReportResult:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def markdown_table(table: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table; numbers to 3 decimals, NaN as an empty cell."""
-    cells = [[_cell(value) for value in row] for row in table.itertuples(index=False)]
-    lines = ["| " + " | ".join(map(str, table.columns)) + " |", "|" + "---|" * len(table.columns)]
-    lines += ["| " + " | ".join(row) + " |" for row in cells]
-    return "\n".join(lines) + "\n"
+@dataclass
+class Studies:
+    """The Optuna studies of the report: ``read`` (file stem -> study) and ``skipped`` lines."""
+
+    read: dict[str, StudySummary] = field(default_factory=dict)
+    skipped: list[str] = field(default_factory=list)
 
 
 def _count(number: int, noun: str) -> str:
     return f"{number} {noun}" + ("" if number == 1 else "s")
 
 
-def _cell(value) -> str:
-    if value is pd.NA:
-        return ""
-    if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.3f}"
-    return str(value)
+def _open_given_storages(specs: Sequence[str]) -> list[StudyStorage]:
+    """The ``--storage`` storages, opened; a bad one stops the report (ReportInputError)."""
+    try:
+        return [open_study_storage(spec) for spec in specs]
+    except StudyStorageError as err:
+        raise ReportInputError(f"--storage {err}") from None
+
+
+def _read_studies(given: list[StudyStorage], folder: Path) -> Studies:
+    """Every study of the given storages and of the storages in ``folder/search/``; a found
+    storage that cannot be read is skipped with a line in ``skipped``."""
+    found = find_study_storages(folder)
+    studies = Studies()
+    if not given and not found:
+        return studies
+    from analysis.search_figures import read_study  # imports optuna: only when there are studies
+
+    opened = list(given)
+    for path in found:
+        try:
+            opened.append(open_study_storage(path))
+        except StudyStorageError as err:
+            studies.skipped.append(str(err))
+    for storage in opened:
+        for name in storage.study_names:
+            stem = name if name not in studies.read else f"{name}-{len(studies.read) + 1}"  # same name elsewhere
+            studies.read[stem] = read_study(storage.storage, name)
+    return studies
+
+
+def _render(job: tuple[ReportFigure, Path, str]) -> str:
+    """Draw one figure and save it as ``path`` in format ``fmt`` -> the ``<img>`` embedding it
+    (a PNG rendering for PDF: browsers do not show a PDF in an image)."""
+    report_figure, path, fmt = job
+    figure = report_figure.draw()
+    figure.savefig(path, format=fmt, dpi=DPI, **({"pil_kwargs": FAST_PNG} if fmt == "png" else {}))
+    if fmt == "pdf":
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png", dpi=DPI, pil_kwargs=FAST_PNG)
+        data, mime = buffer.getvalue(), MIME["png"]
+    else:
+        data, mime = path.read_bytes(), MIME[fmt]
+    return f'<img alt="{html.escape(report_figure.title)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
 
 
 def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
+    """``<name>.csv`` for each table, and ``<name>.md`` but for the run list."""
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, table in tables.items():
@@ -91,84 +152,98 @@ def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
     return written
 
 
-def _embedded(figure: ReportFigure, fmt: str, saved: Path) -> str:
-    """An <img> holding the figure: the saved SVG or PNG, or a PNG rendering when the format is PDF."""
-    if fmt == "pdf":
-        buffer = io.BytesIO()
-        figure.figure.savefig(buffer, format="png", dpi=DPI, pil_kwargs=FAST_PNG)
-        data, mime = buffer.getvalue(), "image/png"
-    else:
-        data, mime = saved.read_bytes(), "image/svg+xml" if fmt == "svg" else "image/png"
-    return f'<img alt="{html.escape(figure.title)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
+def _write_studies(studies: Studies, folder: Path) -> list[Path]:
+    """Each study's best trials as ``<stem>_best_trials.csv`` and ``.md``."""
+    written = []
+    for stem, study in studies.read.items():
+        study.best.to_csv(folder / f"{stem}_best_trials.csv", index=False)
+        (folder / f"{stem}_best_trials.md").write_text(study.best_markdown(), encoding="utf-8")
+        written += [folder / f"{stem}_best_trials.csv", folder / f"{stem}_best_trials.md"]
+    return written
 
 
-def _html_table(table: pd.DataFrame) -> str:
-    return table.to_html(index=False, na_rep="", float_format=lambda v: f"{v:.3f}", border=0, classes="data")
+def _html_figure(figure: ReportFigure, image: str) -> str:
+    return (f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
+            f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
 
 
-def _search_section(folder: Path, out: Path, storages: Sequence[str] = ()) -> tuple[list[Path], list[str]]:
-    """Figures and best-trial tables of the Optuna studies under ``folder/search`` (hersd-search's
-    default SQLite files, and journal files) and in ``storages`` (URLs or files) -> (files
-    written, HTML parts); nothing when there is no study."""
-    found = sorted(path for pattern in ("*.db", "*.log", "*.journal") for path in (folder / "search").glob(pattern))
-    sources = [str(path) for path in found] + list(storages)
-    if not sources:
-        return [], []
-    from analysis.search_figures import StudyStorageError, study_figures  # imports optuna, only needed here
-
-    written: list[Path] = []
-    parts = ["<h2>Optuna searches</h2>"]
-    for source in sources:
-        try:
-            files = study_figures(source, out / "search")
-        except StudyStorageError as err:
-            raise ReportInputError(f"--storage {source.split('@')[-1]}: {err}") from None
-        written += files
-        for path in files:
-            if path.suffix == ".png":
-                parts.append(f'<figure><h3>{html.escape(path.stem)}</h3><img alt="{html.escape(path.stem)}" '
-                             f'src="data:image/png;base64,{base64.b64encode(path.read_bytes()).decode()}"></figure>')
-            elif path.suffix == ".csv":
-                parts += [f"<h3>Best trials: {html.escape(path.stem.removesuffix('_best_trials'))}</h3>",
-                          _html_table(pd.read_csv(path))]
-    return written, parts
-
-
-def _html_page(folder: Path, summary: pd.DataFrame, aggregate: pd.DataFrame, runs: pd.DataFrame,
-               figures: list[tuple[ReportFigure, str]], window: int, skipped: list[str],
-               search_parts: list[str]) -> str:
-    incomplete = int((~runs["complete"]).sum())
+def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[tuple[ReportFigure, str]],
+               studies: Studies, study_images: list[str]) -> str:
+    """The report page: summary tables, figures (the composition table after its figure), studies, runs."""
+    runs = table.runs
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
-             f"<p>{_count(len(runs), 'run')} ({incomplete} incomplete), {_count(runs['task'].nunique(), 'task')}, "
-             f"{_count(runs['config'].nunique(), 'configuration')}; test success smoothed over "
-             f"{_count(window, 'epoch')}.</p>"]
+             f"<p>{_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete), "
+             f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
+             f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
+    skipped = [f"log {line}" for line in table.skipped] + [f"study storage {line}" for line in studies.skipped]
     if skipped:
-        parts.append("<p>Skipped unreadable logs:</p><ul>"
-                     + "".join(f"<li>{html.escape(line)}</li>" for line in skipped) + "</ul>")
-    parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>", _html_table(summary),
-              "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>", _html_table(aggregate), "<h2>Figures</h2>"]
-    for figure, image in figures:
+        parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
+                     + "</ul>")
+    parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
+              html_table(analysis.summary), "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
+              html_table(analysis.aggregate), "<h2>Figures</h2>"]
+    for figure, image in images:
         parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
                      f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
-    parts += search_parts
-    parts += ["<h2>Runs</h2>", _html_table(runs[RUN_LIST_COLUMNS])]
-    style = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:1em}"
-             "table.data{border-collapse:collapse;font-size:0.85em}"
-             "table.data td,table.data th{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}"
-             "img{max-width:100%}figure{margin:2em 0}figcaption{color:#333;max-width:60em}")
+        if figure.name == f"composition_{PAPER_COMPOSITION_TASK}" and not analysis.composition_vs_paper.empty:
+            parts += [f"<h3>Minibatch composition at epoch {PAPER_COMPOSITION_EPOCH}: hersd vs paper</h3>",
+                      f"<p>{TABLE_NOTES['composition']}</p>", html_table(analysis.composition_vs_paper)]
+    if studies.read:
+        parts.append("<h2>Optuna searches</h2>")
+        for (stem, study), image in zip(studies.read.items(), study_images):
+            parts += [f"<figure><h3>{html.escape(stem)}: trials in the (β1, β2) plane</h3>{image}</figure>",
+                      f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
+                      html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
+                                 float_format="{:.4g}")]
+    parts += ["<h2>Runs</h2>", html_table(runs[RUN_LIST_COLUMNS])]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
-            f"<style>{style}</style></head><body>{''.join(parts)}</body></html>\n")
+            f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def _study_figures(studies: Studies) -> list[ReportFigure]:
+    from analysis.figures import ReportFigure
+
+    return [ReportFigure(f"{stem}_beta_plane", f"{stem}: trials in the (β1, β2) plane", study.value_label,
+                         study.beta_plane) for stem, study in studies.read.items()]
+
+
+def _load(folder: Path, tasks, algos, timings: dict[str, float]) -> RunTable:
+    """Read the logs (in worker processes when there are many), importing the modules that compute
+    and draw meanwhile; timings gets ``load`` (the whole stage) and ``imports`` (those imports)."""
+    start = time.perf_counter()
+    reading = start_reading(folder)
+    import_start = time.perf_counter()
+    import scipy.stats  # noqa: F401  (the IQM and its bootstrap)
+
+    import analysis.figures  # noqa: F401  (matplotlib)
+
+    timings["imports"] = time.perf_counter() - import_start
+    table = reading.result(tasks, algos)
+    if not (table.runs["epochs_done"] > 0).any():
+        raise ReportInputError(f"none of the {len(table.runs)} runs under {folder} has a completed epoch yet")
+    timings["load"] = time.perf_counter() - start
+    return table
+
+
+def _draw(figures: list[ReportFigure], folders: list[Path], fmt: str) -> tuple[list[Path], list[str]]:
+    """Draw and save every figure (``figures[i]`` into ``folders[i]``), one worker process per core
+    -> (the files, the ``<img>`` of each)."""
+    paths = [folder / f"{figure.name}.{fmt}" for figure, folder in zip(figures, folders)]
+    for folder in set(folders):
+        folder.mkdir(parents=True, exist_ok=True)
+    return paths, ForkedMap(_render, [(figure, path, fmt) for figure, path in zip(figures, paths)]).results()
 
 
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
                  algos: Sequence[str] | None = None, window: int = DEFAULT_WINDOW, fmt: str = "png",
-                 log: Callable[[str], None] = print,
-                 warn: Callable[[str], None] = lambda line: print(line, file=sys.stderr),
-                 storages: Sequence[str] = ()) -> ReportResult:
-    """Load, compute, draw and write the report; ``log`` receives progress lines, ``warn``
-    one line per skipped log; ``storages`` adds Optuna study storages beyond ``folder/search``.
+                 storages: Sequence[str] = (), log: Callable[[str], None] = print,
+                 warn: Callable[[str], None] = lambda line: print(line, file=sys.stderr)) -> ReportResult:
+    """Load, compute, draw and write the report; ``log`` receives progress lines, ``warn`` one
+    line per skipped log or study storage; ``storages`` (URLs or files) are read besides the
+    study storages found in ``folder/search/``.
 
-    Raises :class:`ReportInputError` for input that cannot make a report.
+    Raises :class:`ReportInputError` for input that cannot make a report (checked before any
+    log is read for the options and the given storages).
     """
     if fmt not in FORMATS:
         raise ReportInputError(f"unknown figure format {fmt!r}; choose one of: {', '.join(FORMATS)}")
@@ -176,49 +251,44 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
     folder = Path(folder)
     out = Path(out) if out is not None else folder / "report"
+    given = _open_given_storages(storages)
     timings: dict[str, float] = {}
-
-    start = time.perf_counter()
-    table = load_runs(folder, tasks=tasks, algos=algos)
+    table = _load(folder, tasks, algos, timings)
     for line in table.skipped:
         warn(f"warning: skipped unreadable log {line}")
     runs = table.runs
-    if not (runs["epochs_done"] > 0).any():
-        raise ReportInputError(f"none of the {len(runs)} runs under {folder} has a completed epoch yet")
-    timings["load"] = time.perf_counter() - start
-    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} skipped), "
-        f"{_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
+    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} "
+        f"skipped), {_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
         f"{_count(runs['config'].nunique(), 'configuration')} in {timings['load']:.1f} s")
+    studies = _read_studies(given, folder)
+    for line in studies.skipped:
+        warn(f"warning: skipped study storage {line}")
+
+    from analysis.figures import all_figures
+    from analysis.metrics import analyse
 
     start = time.perf_counter()
     analysis = analyse(runs, table.epochs, window)
     timings["metrics"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    figures_dir = out / "figures"
-    figures_dir.mkdir(parents=True, exist_ok=True)
-    drawn = all_figures(analysis)
-    saved = []
-    embedded = []
-    for figure in drawn:
-        path = figures_dir / f"{figure.name}.{fmt}"
-        figure.figure.savefig(path, format=fmt, dpi=DPI, **({"pil_kwargs": FAST_PNG} if fmt == "png" else {}))
-        saved.append(path)
-        embedded.append((figure, _embedded(figure, fmt, path)))
+    figures, study_figures = all_figures(analysis), _study_figures(studies)
+    folders = [out / "figures"] * len(figures) + [out / "search"] * len(study_figures)
+    paths, images = _draw(figures + study_figures, folders, fmt)
     timings["figures"] = time.perf_counter() - start
-    log(f"drew {_count(len(drawn), 'figure')} in {timings['figures']:.1f} s")
+    log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 
     start = time.perf_counter()
-    tables = _write_tables({"summary": analysis.summary, "aggregate": analysis.aggregate,
-                            "runs": runs.drop(columns="run")}, out / "tables")
-    search_files, search_parts = _search_section(folder, out, storages)
-    saved += [path for path in search_files if path.suffix != ".csv" and path.suffix != ".md"]
-    tables += [path for path in search_files if path.suffix in (".csv", ".md")]
+    tables = {"summary": analysis.summary, "aggregate": analysis.aggregate}
+    if not analysis.composition_vs_paper.empty:
+        tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
+    written = _write_tables({**tables, "runs": runs.drop(columns="run")}, out / "tables")
+    written += _write_studies(studies, out / "search")
     index = out / "index.html"
-    index.write_text(_html_page(folder, analysis.summary, analysis.aggregate, runs, embedded, window, table.skipped,
-                                search_parts), encoding="utf-8")
-    timings["html"] = time.perf_counter() - start
-    return ReportResult(index=index, figures=saved, tables=tables, timings=timings)
+    index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):]),
+                     encoding="utf-8")
+    timings["writing"] = time.perf_counter() - start
+    return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -229,7 +299,8 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = _OneLineParser(prog="hersd-report", description="Tables, figures and an HTML report from hersd run logs.")
+    parser = _OneLineParser(prog="hersd-report",
+                            description="Tables, figures and an HTML report from hersd run logs and Optuna studies.")
     parser.add_argument("folder", type=Path, help="folder searched recursively for run.mcap files")
     parser.add_argument("--out", type=Path, help="output folder (default: FOLDER/report)")
     parser.add_argument("--task", nargs="+", help="keep only these tasks (config task.name, e.g. push slide)")
@@ -238,8 +309,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"moving-average window of the learning curves in epochs (default {DEFAULT_WINDOW})")
     parser.add_argument("--format", choices=FORMATS, default="png", help="figure file format (default png)")
     parser.add_argument("--storage", action="append", default=[], metavar="URL",
-                        help="also draw the Optuna studies of this storage (a SQLAlchemy URL such as "
-                             "postgresql://..., a .db file or a journal file); repeatable")
+                        help="also draw the Optuna studies of this storage, opened read-only: a SQLAlchemy URL "
+                             "(e.g. postgresql+psycopg2://user@host/db), journal:<file>, or a .db / .log / "
+                             ".journal file; repeatable (the storages in FOLDER/search/ are always read)")
     args = parser.parse_args(argv)
     try:
         result = build_report(args.folder, args.out, tasks=args.task, algos=args.algo, window=args.smooth,
@@ -247,8 +319,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ReportInputError as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
-    stages = ", ".join(f"{stage} {seconds:.1f} s" for stage, seconds in result.timings.items())
-    print(f"report written to {result.index} ({stages})")
+    timings = result.timings
+    print(f"report written to {result.index} (load {timings['load']:.1f} s incl. imports {timings['imports']:.1f} s, "
+          f"metrics {timings['metrics']:.1f} s, figures {timings['figures']:.1f} s, "
+          f"writing {timings['writing']:.1f} s)")
     return 0
 
 

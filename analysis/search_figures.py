@@ -2,7 +2,7 @@
 
 - ``<study>_beta_plane.png``: every trial in the (beta1, beta2) plane over the mu_eps
   iso-lines of eq. 11 (mu_eps = 1 - beta1 / (1 + exp(beta2))) with the band
-  0.8 <= mu_eps <= 0.889 shaded (the seed paper's Fig. 12 region); complete trials are
+  hersd.schedules.MU_EPS_BAND (0.8 <= mu_eps <= 0.889) shaded (the seed paper's Fig. 12 region); complete trials are
   filled dots coloured by their objective, pruned ones open circles coloured by their last
   report, failed ones crosses; the best trial is starred. Linear-schedule trials sit on
   beta2 = 0; constant-schedule trials have no place in the plane and are only counted.
@@ -10,14 +10,16 @@
   the study's epochs (eq. 10) and by eq. 11, and their run directories.
 
 :func:`study_figures` draws these for every study in a storage (or one), opened read-only
-by :func:`open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR [--study
-NAME]`` does the same from the command line (``hersd-search`` runs it). Needs optuna, pandas
+by :func:`analysis.studies.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR [--study
+NAME]`` does the same from the command line (``hersd-report`` draws them for every study it
+finds). Needs optuna, pandas
 and matplotlib, not torch or MuJoCo.
 """
 
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -34,10 +36,15 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
-from hersd.schedules import MU_EPS_BAND, mean_rate_approx, schedule_mean_rates  # noqa: E402
-ISO_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.889, 0.95)
+from analysis.studies import StudyStorageError, open_study_storage  # noqa: E402
+from analysis.tables import markdown_table  # noqa: E402
+from hersd.schedules import MU_EPS_BAND, effective_beta2, mean_rate_approx, schedule_mean_rates  # noqa: E402
+
+ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
+# The parameters a trial of each schedule kind is searched with (sweeps/search/config.py's space).
 SCHEDULE_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
+PLANE_KINDS = tuple(kind for kind, names in SCHEDULE_PARAMS.items() if "beta1" in names)  # eq. 9 decays
 COLUMNS = ["trial", "state", "value", "kind", "beta1", "beta2", "eps", "lambda_h", "mu_eps", "mu_eps_approx",
            "in_band", "last_step", "retry_of", "duration_s", "run_dirs"]
 
@@ -62,14 +69,17 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
             continue
         params = dict(trial.params)
         kind = _schedule_kind(params)
+        decays = kind in PLANE_KINDS
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
-               "beta1": params.get("beta1"), "beta2": params.get("beta2", 0.0 if kind == "linear" else None),
+               "beta1": params.get("beta1"),
+               "beta2": effective_beta2(kind, params.get("beta2", 0.0)) if decays else None,
                "eps": params.get("eps"), "lambda_h": params.get("lambda_h"), "last_step": trial.last_step,
                "retry_of": trial.user_attrs.get("retry_of"),
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
                "run_dirs": ";".join(trial.user_attrs.get("run_dirs", []))}
-        if kind is not None and set(SCHEDULE_PARAMS[kind]) <= set(params):
-            exact, approx = _mean_rates({**params, "kind": kind}, epochs or 1)
+        if kind in SCHEDULE_PARAMS and set(SCHEDULE_PARAMS[kind]) <= set(params):
+            exact, approx = schedule_mean_rates(kind, params.get("eps"), params.get("beta1"), params.get("beta2"),
+                                                epochs or 1)
             row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
                        in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])
         rows.append(row)
@@ -113,7 +123,7 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
                        linewidths=[1.6 if level in MU_EPS_BAND else 0.8 for level in ISO_LEVELS])
     ax.clabel(lines, fmt=lambda level: f"{level:g}", fontsize=8)
 
-    in_plane = frame[frame["kind"].isin(["linear", "exponential"]) & frame["beta1"].notna()]
+    in_plane = frame[frame["kind"].isin(PLANE_KINDS) & frame["beta1"].notna()]
     scored = in_plane[in_plane["state"].isin(["complete", "pruned"])]
     finite = scored["value"][np.isfinite(scored["value"])]
     norm = Normalize(finite.min(), finite.max()) if not finite.empty else Normalize(0.0, 1.0)
@@ -152,18 +162,38 @@ def plot_beta_plane(frame: pd.DataFrame, beta2_range: tuple[float, float], title
     return fig
 
 
-def markdown_table(frame: pd.DataFrame) -> str:
-    """A pipe table; floats to 4 significant digits, missing values blank."""
-    def cell(value: object) -> str:
-        if value is None or (isinstance(value, float) and np.isnan(value)):
-            return ""
-        if isinstance(value, (float, np.floating)):
-            return f"{value:.4g}"
-        return str(value)
+@dataclass
+class StudySummary:
+    """One study, read: ``trials`` (:func:`trials_frame`), ``best`` (:func:`best_trials`), the
+    label of its objective and the beta2 range of its search space."""
 
-    lines = ["| " + " | ".join(frame.columns) + " |", "|" + "---|" * len(frame.columns)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
-    return "\n".join(lines) + "\n"
+    name: str
+    trials: pd.DataFrame
+    best: pd.DataFrame
+    value_label: str
+    beta2_range: tuple[float, float]
+
+    def beta_plane(self) -> Figure:
+        return plot_beta_plane(self.trials, self.beta2_range, f"{self.name}: {len(self.trials)} trials",
+                               self.value_label)
+
+    def best_markdown(self) -> str:
+        """The best trials as a Markdown document (run directories left out: too wide)."""
+        return (f"# Best trials of study `{self.name}`\n\n{self.value_label}; mu_eps exact over the study's "
+                f"epochs (eq. 10) and by eq. 11.\n\n"
+                + markdown_table(self.best.drop(columns=["run_dirs"], errors="ignore"), float_format="{:.4g}")
+                + ("" if len(self.best) else "\n(no complete trials yet)\n"))
+
+
+def read_study(storage: optuna.storages.BaseStorage, name: str, top: int = 10) -> StudySummary:
+    """Everything drawn of study ``name``, read once from ``storage`` (an opened, read-only storage)."""
+    study = optuna.load_study(study_name=name, storage=storage)
+    frame = trials_frame(study)
+    settings = study.user_attrs.get("settings", {})
+    value_label = (f"{settings['objective']} of {settings['metric']}, mean of {settings['seeds']} seed(s)"
+                   if settings else "objective")
+    return StudySummary(name=name, trials=frame, best=best_trials(frame, top), value_label=value_label,
+                        beta2_range=_beta2_range(study, frame))
 
 
 def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study_name: str | None = None,
@@ -171,72 +201,27 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     """Draw the beta-plane figure and the best-trials tables of each study in the storage
     (or only ``study_name``) into ``out_dir``; -> the files written.
 
-    ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a SQLAlchemy
-    URL, or ``journal:<path>``.
+    ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a journal file, ``journal:<path>``
+    or a SQLAlchemy URL, opened read-only (:func:`analysis.studies.open_study_storage`, which raises
+    :class:`analysis.studies.StudyStorageError` for one it cannot read).
     """
-    storage = open_study_storage(str(storage_url_or_db_path))
+    opened = open_study_storage(storage_url_or_db_path)
+    if study_name is not None and study_name not in opened.study_names:
+        raise StudyStorageError(f"{opened.shown}: no study named {study_name!r} "
+                                f"(it holds: {', '.join(opened.study_names)})")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    names = [study_name] if study_name is not None else sorted(optuna.get_all_study_names(storage))
     written: list[Path] = []
-    for name in names:
-        study = optuna.load_study(study_name=name, storage=storage)
-        frame = trials_frame(study)
-        settings = study.user_attrs.get("settings", {})
-        value_label = (f"{settings['objective']} of {settings['metric']}, mean of {settings['seeds']} seed(s)"
-                       if settings else "objective")
-        figure = plot_beta_plane(frame, _beta2_range(study, frame), f"{name}: {len(frame)} trials", value_label)
+    for name in [study_name] if study_name is not None else opened.study_names:
+        study = read_study(opened.storage, name, top)
         figure_path = out_dir / f"{name}_beta_plane.png"
-        figure.savefig(figure_path, dpi=150)
-        best = best_trials(frame, top)
+        study.beta_plane().savefig(figure_path, dpi=150)
         csv_path = out_dir / f"{name}_best_trials.csv"
-        best.to_csv(csv_path, index=False)
+        study.best.to_csv(csv_path, index=False)
         md_path = out_dir / f"{name}_best_trials.md"
-        md_path.write_text(f"# Best trials of study `{name}`\n\n{value_label}; mu_eps exact over the study's "
-                           f"epochs (eq. 10) and by eq. 11.\n\n"
-                           + markdown_table(best.drop(columns=["run_dirs"], errors="ignore"))
-                           + ("" if len(best) else "\n(no complete trials yet)\n"))
+        md_path.write_text(study.best_markdown(), encoding="utf-8")
         written += [figure_path, csv_path, md_path]
     return written
-
-
-def _mean_rates(params: dict, epochs: int) -> tuple[float, float]:
-    """mu_eps of a trial's schedule parameters: exact over the study's epochs (eq. 10) and by eq. 11."""
-    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
-
-
-class StudyStorageError(ValueError):
-    """A study storage cannot be opened; the message is one line for the user."""
-
-
-def open_study_storage(spec: str) -> optuna.storages.BaseStorage:
-    """Open an Optuna storage to read its studies: a SQLite file (``*.db``), a journal file
-    (``*.log``, ``*.journal`` or ``journal:<path>``) or a SQLAlchemy URL (e.g. ``postgresql://...``).
-    Nothing is created: a missing file or an unreachable database raises :class:`StudyStorageError`."""
-    from optuna.storages import JournalStorage, RDBStorage
-    from optuna.storages.journal import JournalFileBackend
-    from sqlalchemy.exc import ArgumentError, NoSuchModuleError, OperationalError
-
-    if "://" not in spec:
-        path = Path(spec.removeprefix("journal:")).expanduser()
-        if not path.is_file():
-            raise StudyStorageError(f"{path}: no such study storage")
-        if spec.startswith("journal:") or path.suffix in (".log", ".journal"):
-            return JournalStorage(JournalFileBackend(str(path)))
-        spec = f"sqlite:///{path.resolve()}"
-    try:
-        storage = RDBStorage(spec, skip_table_creation=True)
-        storage.get_all_studies()  # connects: an unreachable database fails here, not later
-        return storage
-    except (NoSuchModuleError, ArgumentError) as err:
-        raise StudyStorageError(f"{spec}: not a storage URL ({' '.join(str(err).split())[:160]})") from None
-    except ImportError as err:
-        raise StudyStorageError(f"the database driver is missing ({err.name or err}); for PostgreSQL "
-                                f'pip install "hersd[cluster]"') from None
-    except (OperationalError, optuna.exceptions.StorageInternalError) as err:
-        cause = getattr(err, "orig", None) or err.__cause__ or err  # optuna wraps SQLAlchemy's error
-        raise StudyStorageError(f"cannot reach the database at {spec.split('@')[-1]} "
-                                f"({' '.join(str(getattr(cause, 'orig', None) or cause).split())[:160]})") from None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -57,10 +57,13 @@ def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[st
     return [{name: values[i].item() for name, values in columns.items()} for i in range(len(k))]
 
 
-def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, complete: bool = True) -> Path:
+def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, complete: bool = True,
+              **fields: np.ndarray) -> Path:
     """Write ``<folder>/run.mcap`` for ``config`` with the given test-success curve; returns its path.
 
-    ``complete`` marks the run finished (the curve should then have config.epochs values).
+    ``complete`` marks the run finished (the curve should then have config.epochs values);
+    ``fields`` replace epoch fields of :func:`epoch_records` (name -> values, shape like the curve),
+    e.g. ``share_hindsight=np.full(n, 0.8)``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -69,8 +72,8 @@ def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, compl
             "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0}
     writer = RunLogWriter(folder / LOG_NAME, meta)
     records = epoch_records(config, test_success)
-    for record in records:
-        writer.write_epoch(record)
+    for index, record in enumerate(records):
+        writer.write_epoch({**record, **{name: np.asarray(values)[index].item() for name, values in fields.items()}})
     if complete:
         writer.finish(len(records))
     else:

@@ -1,16 +1,22 @@
 """Time ``hersd-report`` on 500 synthetic runs x 200 epochs (4 tasks x 25 configurations x 5 seeds).
 
-    python benchmarks/bench_report.py [--keep DIR]
+    python benchmarks/bench_report.py [--keep DIR] [--repeat N]
 
 Runs ``python -m analysis.report FOLDER`` (what the ``hersd-report`` script runs) in a fresh
-interpreter and prints its wall and CPU seconds and the split the report prints (load /
-metrics / figures / html); fails (exit 1) when it takes 15 s or more of wall-clock time. The logs are written with
+interpreter, as a user would, and prints its wall and CPU seconds (CPU: the report and its
+worker processes) and the split: interpreter start and ``import analysis.report`` (timed
+alone in another fresh interpreter), then the stages the report prints (load, including the
+imports of scipy and matplotlib done while worker processes read the logs; metrics; figures;
+writing). ``--repeat N``
+runs it N times and judges the fastest (the others show how much a busy machine slows it).
+Fails (exit 1) when it takes 8 s or more of wall-clock time. The logs are written with
 RunLogWriter in a temporary folder (not timed), or in ``--keep DIR`` to look at them after.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import resource
 import subprocess
@@ -27,7 +33,7 @@ from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, Trai
 from hersd.runstore import run_dir
 from hersd.schedules import schedule_mean_rate
 
-BUDGET_SECONDS = 15.0
+BUDGET_SECONDS = 8.0
 EPOCHS = 200
 SEEDS = 5
 TASK_DIFFICULTY = {"reach": 0.02, "push": 0.25, "pick_and_place": 0.45, "slide": 0.8}
@@ -85,28 +91,46 @@ def _write_logs(folder: Path) -> int:
     return count
 
 
+def time_report(folder: Path) -> tuple[float, float, str]:
+    """One ``python -m analysis.report folder`` in a fresh interpreter -> (wall s, CPU s, its last line)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    finished = subprocess.run([sys.executable, "-m", "analysis.report", str(folder)], capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)  # includes the report's own worker processes
+    if finished.returncode != 0:
+        raise SystemExit(f"hersd-report failed with exit status {finished.returncode}:\n{finished.stderr}")
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return wall, cpu, finished.stdout.strip().splitlines()[-1]
+
+
+def time_start_up() -> float:
+    """Wall seconds of a fresh interpreter that only imports the report's module."""
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import analysis.report"], check=True)
+    return time.perf_counter() - start
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--keep", type=Path, help="write the logs and the report here instead of a temporary folder")
+    parser.add_argument("--repeat", type=int, default=1, help="time the report this many times (default 1)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="hersd-bench-") as temporary:
         folder = args.keep or Path(temporary)
         start = time.perf_counter()
         count = write_logs(folder)
         print(f"wrote {count} synthetic runs x {EPOCHS} epochs in {time.perf_counter() - start:.1f} s (not timed)")
-        # The command as a user runs it: a fresh interpreter, imports included.
-        start = time.perf_counter()
-        finished = subprocess.run([sys.executable, "-m", "analysis.report", str(folder)], capture_output=True, text=True)
-        total = time.perf_counter() - start
-    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
-    print(finished.stdout + finished.stderr, end="")
-    if finished.returncode != 0:
-        print(f"hersd-report failed with exit status {finished.returncode}")
-        return 1
-    stages = re.search(r"\((load .*)\)\s*$", finished.stdout).group(1)
-    print(f"hersd-report on {count} runs: {total:.2f} s wall total, {cpu.ru_utime + cpu.ru_stime:.2f} s CPU; "
-          f"stages: {stages}; the rest is interpreter start and imports; budget {BUDGET_SECONDS:g} s wall")
-    return 0 if total < BUDGET_SECONDS else 1
+        timings = [time_report(folder) for _ in range(args.repeat)]
+        start_up = min(time_start_up() for _ in range(args.repeat))
+    for wall, cpu, line in timings:
+        print(f"  {wall:.2f} s wall, {cpu:.2f} s CPU: {line}")
+    wall, cpu, line = min(timings)
+    stages = re.search(r"\((load .*)\)\s*$", line).group(1)
+    print(f"hersd-report on {count} runs: {wall:.2f} s wall, {cpu:.2f} s CPU on {os.cpu_count()} cores; "
+          f"interpreter start and import analysis.report {start_up:.2f} s, then {stages}; "
+          f"budget {BUDGET_SECONDS:g} s wall")
+    return 0 if wall < BUDGET_SECONDS else 1
 
 
 if __name__ == "__main__":

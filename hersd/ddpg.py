@@ -14,7 +14,7 @@ arrays from the host-side replay buffer and are moved there once per update.
 from __future__ import annotations
 
 import copy
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import numpy as np
 import torch
@@ -68,12 +68,14 @@ def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> nn.
 
 
 class UpdateStats(NamedTuple):
-    """Per-update scalars: losses and the mean and mean square of Q(s, a) over the batch."""
+    """Per-update scalars: losses, the mean and mean square of Q(s, a) over the batch, and (SAC
+    only) the mean -log pi(a|s) of the actor's sampled actions."""
 
     critic_loss: float
     actor_loss: float
     q_mean: float
     q_sq_mean: float
+    entropy: Optional[float] = None
 
 
 class DDPG:

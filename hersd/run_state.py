@@ -17,7 +17,7 @@ import torch
 
 from hersd.config import ConfigError, TrainConfig
 from hersd.ddpg import DDPG
-from hersd.envs import EnvSpec, env_spec, goal_reward, make_env
+from hersd.envs import EnvSpec, env_spec, make_env, reward_function
 from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer
 from hersd.resources import available_memory_bytes
@@ -44,6 +44,7 @@ class RunState:
             for env, env_seed in zip(envs, seq.generate_state(len(envs))):
                 env.reset(seed=int(env_seed))
         self.spec = spec = env_spec(self.train_envs[0])
+        self._reward = reward_function(self.train_envs[0], cfg.task.env_id)
         check_memory(cfg, spec)
         self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
         self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
@@ -55,8 +56,8 @@ class RunState:
         self.train_success: list[float] = []
 
     def reward(self, achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """The task's sparse reward for achieved and desired goals (..., goal_dim) -> (...,)."""
-        return goal_reward(achieved, goal, self.spec.distance_threshold)
+        """The task's sparse reward for achieved and desired goals (..., goal_dim) -> (...,) float32."""
+        return self._reward(achieved, goal)
 
     def effective_totals(self) -> dict[str, Any]:
         """Totals that make runs comparable whatever the worker layout (logged with the run)."""

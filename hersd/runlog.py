@@ -52,8 +52,13 @@ EPOCH_FIELDS: dict[str, tuple[str, str]] = {
     "epoch_seconds": ("number", "wall-clock seconds of the whole epoch"),
     "mep_fit_seconds": ("number", "seconds spent fitting the MEP density model (null without MEP)"),
     "priority_entropy": ("number", "entropy of the episode sampling distribution in nats (null without MEP)"),
+    "test_distance": ("number", "mean distance ||achieved - desired goal|| at the last step of the test episodes "
+                                "(in the goal's units; null in logs written before it was recorded)"),
+    "alpha": ("number", "SAC's entropy temperature at the end of the epoch (null for other learners)"),
+    "policy_entropy": ("number", "SAC: mean -log pi(a|s) of the actor's sampled actions over this epoch's updates "
+                                 "(null for other learners)"),
 }
-OPTIONAL_EPOCH_FIELDS = ("mep_fit_seconds", "priority_entropy")
+OPTIONAL_EPOCH_FIELDS = ("mep_fit_seconds", "priority_entropy", "test_distance", "alpha", "policy_entropy")
 
 
 def _schema(title: str, properties: dict[str, Any], required: Iterable[str]) -> bytes:

@@ -118,7 +118,8 @@ class SAC(DDPG):
         alpha_loss.backward()
         self.alpha_optimizer.step()
         q = q.detach()
-        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item())
+        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item(),
+                           entropy=-log_prob.detach().mean().item())
 
     @torch.no_grad()
     def update_targets(self) -> None:

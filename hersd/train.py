@@ -70,6 +70,7 @@ class EpochStats:
         self.seconds: dict[str, float] = {"rollout": 0.0, "update": 0.0, "eval": 0.0}
         self.train_success: list[np.ndarray] = []  # one (rollouts,) bool array per cycle
         self.critic_loss = self.actor_loss = self.q_sum = self.q_sq_sum = 0.0  # summed over updates
+        self.entropy_sum: float | None = None  # summed over updates by learners that report it (SAC)
         self.n_updates = self.sampled = self.relabelled = self.real_success = 0
 
     @contextmanager
@@ -85,17 +86,20 @@ class EpochStats:
         self.actor_loss += stats.actor_loss
         self.q_sum += stats.q_mean
         self.q_sq_sum += stats.q_sq_mean
+        if stats.entropy is not None:
+            self.entropy_sum = (self.entropy_sum or 0.0) + stats.entropy
         self.n_updates += 1
         self.sampled += batch.relabelled.shape[0]
         self.relabelled += int(batch.relabelled.sum())
         self.real_success += int(batch.real_success.sum())
 
-    def record(self, state: RunState, test_success: np.ndarray) -> dict[str, Any]:
+    def record(self, state: RunState, test_success: np.ndarray, test_distance: np.ndarray) -> dict[str, Any]:
         """The epoch's log record (fields: :data:`hersd.runlog.EPOCH_FIELDS`)."""
         q_mean, q_sq_mean = self.q_sum / self.n_updates, self.q_sq_sum / self.n_updates
         prioritizer = state.prioritizer
         return {
             "epoch": self.epoch, "relabel_rate": self.relabel_rate, "test_success": float(test_success.mean()),
+            "test_distance": float(test_distance.mean()),
             "train_success": float(np.concatenate(self.train_success).mean()),
             "q_mean": q_mean, "q_std": float(np.sqrt(max(q_sq_mean - q_mean ** 2, 0.0))),
             "critic_loss": self.critic_loss / self.n_updates, "actor_loss": self.actor_loss / self.n_updates,
@@ -107,6 +111,8 @@ class EpochStats:
             "eval_seconds": self.seconds["eval"], "epoch_seconds": time.perf_counter() - self.start,
             "mep_fit_seconds": self.seconds.get("mep_fit"),
             "priority_entropy": prioritizer.entropy(state.buffer.size) if prioritizer is not None else None,
+            "alpha": getattr(state.agent, "alpha", None),  # SAC's temperature; the other learners have none
+            "policy_entropy": None if self.entropy_sum is None else self.entropy_sum / self.n_updates,
         }
 
 
@@ -138,10 +144,16 @@ def update(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
     state.updates += d.batches_per_cycle
 
 
-def evaluate(state: RunState) -> np.ndarray:
-    """Success (test_rollouts * rollouts_per_cycle,) bool of deterministic-policy test episodes."""
-    return np.concatenate([run_episodes(state.test_envs, state.agent, state.spec.horizon, explore=False,
-                                        rng=state.rng)[1] for _ in range(state.cfg.ddpg.test_rollouts)])
+def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic-policy test episodes -> (success (n,) bool, final distance ||achieved_T - goal|| (n,)),
+    n = test_rollouts * rollouts_per_cycle."""
+    success, distance = [], []
+    for _ in range(state.cfg.ddpg.test_rollouts):
+        episodes, episode_success = run_episodes(state.test_envs, state.agent, state.spec.horizon, explore=False,
+                                                 rng=state.rng)
+        success.append(episode_success)
+        distance.append(np.linalg.norm(episodes.achieved[:, -1] - episodes.goal[:, -1], axis=-1))
+    return np.concatenate(success), np.concatenate(distance)
 
 
 def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
@@ -157,8 +169,8 @@ def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
         with stats.timed("update"):
             update(state, stats.relabel_rate, stats)
     with stats.timed("eval"):
-        test_success = evaluate(state)
-    record = stats.record(state, test_success)
+        test_success, test_distance = evaluate(state)
+    record = stats.record(state, test_success, test_distance)
     state.epochs_done = epoch
     state.train_success.append(record["train_success"])
     return record

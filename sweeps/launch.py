@@ -110,15 +110,38 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     to_launch = [job for directory, job in planned.items() if states[directory] != "complete"]
     if not to_launch:
         return []
-    if sweep_threads == "auto":  # threads=auto: the cores divided among the runs in flight at once
-        threads = max(1, available_cores() // concurrent_runs(sweeper.config.hydra.launcher, len(to_launch)))
+    if sweep_threads == "auto":
+        threads = auto_threads(sweeper.config.hydra.launcher, len(to_launch))
         to_launch = [with_threads(job, threads) for job in to_launch]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
-    results = sweeper.launcher.launch(to_launch, initial_job_idx=0)
+    results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])
     return [results]
+
+
+def auto_threads(launcher: DictConfig, n_runs: int) -> int:
+    """``threads=auto`` for each run: a SLURM job's cpus_per_task (its allocation, not this
+    machine's cores), else this machine's cores divided among the runs in flight at once."""
+    if str(launcher.get("_target_", "")).endswith("SlurmLauncher"):
+        return int(launcher.get("cpus_per_task") or 1)
+    return max(1, available_cores() // concurrent_runs(launcher, n_runs))
+
+
+def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
+    """Launch the jobs -> their results; a submitit job that died or was cut short is a SweepError."""
+    try:
+        return sweeper.launcher.launch(jobs, initial_job_idx=0)
+    except Exception as err:  # noqa: BLE001 - only submitit's job errors are translated
+        kind = type(err).__name__
+        if not type(err).__module__.startswith("submitit"):
+            raise
+        first_line = (str(err).strip().splitlines() or [kind])[0][:200]
+        what = ("a job timed out or was cancelled (its run is resumable)" if kind == "UncompletedJobError"
+                else "a job died outside hersd")
+        raise SweepError(f"{what}: {first_line}; finished runs are kept: run the same command again to resume "
+                         f"the rest", exit_code=1) from None
 
 
 def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, list[str]]:

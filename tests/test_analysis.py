@@ -1,4 +1,5 @@
-"""analysis/: loading, metrics against hand-computed values, figures, the report command."""
+"""analysis/: loading, metrics against hand-computed values, figures (what they draw), study storages,
+the report command."""
 
 from __future__ import annotations
 
@@ -6,18 +7,25 @@ import math
 import subprocess
 import sys
 from pathlib import Path
+from unittest import mock
 
+import matplotlib.colors
 import numpy as np
 import pandas as pd
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from analysis import metrics
-from analysis.figures import config_styles, mep_figures, q_figures
+from analysis import load, metrics
+from analysis.figures import (LEGEND_CHARACTERS, composition_figures, config_styles, learning_curve_figures,
+                              mep_figures, q_figures)
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
+from analysis.studies import StudyStorageError, open_study_storage
 from analysis.synthetic import epoch_records, write_run
+from analysis.tables import html_table, markdown_table
+from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
-from hersd.runlog import RunLogWriter, read_records, read_run
+from hersd.runlog import RunLogWriter, read_run
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
 WINDOW = 3
@@ -228,10 +236,11 @@ def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, ca
     assert err == ["warning: skipped unreadable log garbage/run.mcap: not a hersd run log (no run metadata found)"]
 
 
-def test_record_reader_agrees_with_read_run(tmp_path):
-    """read_records (used by the loader, no per-file DataFrame) must agree with read_run."""
+def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
+    """Each completed epoch counts once: a truncated log up to its damage, a resumed run's
+    rewritten epoch with its later value."""
     config = make_config(epochs=6)
-    complete = write_run(tmp_path / "complete", config, np.linspace(0, 1, 6))
+    write_run(tmp_path / "complete", config, np.linspace(0, 1, 6))
     truncated = write_run(tmp_path / "truncated", config, np.linspace(0, 1, 6))
     _truncate_inside_epoch(truncated, 5)
     resumed = write_run(tmp_path / "resumed", config, np.linspace(0, 0.5, 4), complete=False)
@@ -240,12 +249,13 @@ def test_record_reader_agrees_with_read_run(tmp_path):
     for record in epoch_records(config, np.linspace(0.1, 1.0, 6))[3:]:  # epoch 4 again, then 5 and 6
         writer.write_epoch(record)
     writer.finish(6)
-    for path in (complete, truncated, resumed):
-        expected, got = read_run(path), read_records(path)
-        assert (got.meta, got.complete, got.damaged) == (expected.meta, expected.complete, expected.damaged)
-        pd.testing.assert_frame_equal(pd.DataFrame.from_records(got.records, columns=expected.epochs.columns)
-                                      .astype(expected.epochs.dtypes), expected.epochs)
-    assert read_records(resumed).records[3]["test_success"] == pytest.approx(0.64)  # the rewrite, not 0.5
+    table = load_runs(tmp_path)
+    runs = table.runs.set_index(table.runs["path"].str.split("/").str[0])
+    assert runs.loc[["complete", "truncated", "resumed"], ["epochs_done", "complete", "damaged"]].values.tolist() == [
+        [6, True, False], [4, False, True], [6, True, False]]
+    resumed_epochs = table.epochs[table.epochs["path"] == "resumed/run.mcap"]
+    assert resumed_epochs["epoch"].tolist() == [1, 2, 3, 4, 5, 6]
+    assert resumed_epochs["test_success"].iloc[3] == pytest.approx(0.64)  # the rewrite, not 0.5
 
 
 # --- the command ------------------------------------------------------------------------------------------------
@@ -314,25 +324,32 @@ def test_no_figure_without_its_data(hand_sized):
     assert q_figures(her_only) == []  # nothing to compare HER with
 
 
-def test_report_runs_without_torch_or_mujoco(sweep, tmp_path):
-    # A finder that refuses the heavy packages. (Setting sys.modules['torch'] = None would also block
-    # the import, but scipy's array-API helpers then trip over the None entry.)
+def test_report_runs_without_torch_mujoco_or_the_sweeps_layer(sweep, tmp_path):
+    # A finder that refuses these packages, in this process and in the report's forked workers:
+    # importing one anywhere fails the report. (Setting sys.modules['torch'] = None would also
+    # block the import, but scipy's array-API helpers then trip over the None entry.)
     script = (
         "import sys\n"
-        "BLOCKED = ('torch', 'mujoco', 'gymnasium_robotics', 'gymnasium')\n"
+        "BLOCKED = ('torch', 'mujoco', 'gymnasium_robotics', 'gymnasium', 'sweeps')\n"
         "class Refuse:\n"
         "    def find_spec(self, name, path=None, target=None):\n"
         "        if name.split('.')[0] in BLOCKED:\n"
         "            raise ImportError(f'{name} is blocked in this test')\n"
         "sys.meta_path.insert(0, Refuse())\n"
         "import analysis.report\n"
-        f"status = analysis.report.main([{str(sweep)!r}, '--out', {str(tmp_path / 'out')!r}, '--task', 'push'])\n"
-        "assert not any(name.split('.')[0] in BLOCKED for name in sys.modules), 'a blocked package was imported'\n"
-        "sys.exit(status)\n"
+        f"sys.exit(analysis.report.main([{str(sweep)!r}, '--out', {str(tmp_path / 'out')!r}, '--task', 'push']))\n"
     )
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
-    assert (tmp_path / "out" / "index.html").exists()
+    assert len(list((tmp_path / "out" / "figures").glob("*.png"))) == 7  # drawn in forked workers too
+
+
+def test_importing_the_report_loads_neither_the_sweeps_layer_nor_heavy_modules():
+    code = ("import sys, analysis, analysis.report\n"
+            "print(sorted(m for m in ('sweeps', 'torch', 'mujoco', 'optuna', 'matplotlib', 'scipy.stats') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"  # optuna, matplotlib and scipy.stats come only when drawing or computing
 
 
 def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_mean_rate(tmp_path):
@@ -353,28 +370,312 @@ def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_
     assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())
 
 
-@pytest.mark.parametrize("storage, message", [
-    ("foo://nowhere", "not a storage URL"),
-    ("postgresql+psycopg2://user@127.0.0.1:1/none", "cannot reach the database at 127.0.0.1:1/none"),
-    ("/no/such/study.db", "no such study storage"),
-])
-def test_a_bad_study_storage_is_one_line_with_exit_2(hand_sized, tmp_path, capsys, storage, message):
-    import importlib.util
 
-    if storage.startswith("postgresql") and importlib.util.find_spec("psycopg2") is None:
-        message = "the database driver is missing"
-    assert report_main([str(hand_sized), "--out", str(tmp_path / "out"), "--storage", storage]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, err
+def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
+    """A folder holding HER at K = 6 and K = 8 (labels "HER (epochs=6)", "HER (epochs=8)") and TD3
+    runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""
+    from hersd.config import LearnerConfig
+
+    def td3(config: TrainConfig) -> TrainConfig:
+        config.learner = LearnerConfig(name="td3")
+        return config
+
+    linear = ScheduleConfig("linear", beta1=0.5)
+    finals = {"her6": 0.4, "her8": 1.0, "linear6": 0.8, "td3_her6": 1.0, "td3_linear6": 0.8}
+    configs = {"her6": make_config(), "her8": make_config(epochs=8), "linear6": make_config(schedule=linear),
+               "td3_her6": td3(make_config()), "td3_linear6": td3(make_config(schedule=linear))}
+    for name, config in configs.items():
+        write_run(tmp_path / name, config, np.full(config.epochs, finals[name]))
+    table = load_runs(tmp_path)
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    p_improve = analysis.summary.set_index("config")["p_improve_HER"]
+    assert p_improve["linear b1=0.5"] == 1.0  # 0.8 beats HER at K = 6 (0.4), not HER at K = 8 (1.0)
+    assert p_improve["TD3 linear b1=0.5"] == 0.0  # TD3's HER (1.0), not DDPG's
+    assert p_improve["HER (epochs=8)"] == 0.5 and p_improve["TD3 HER"] == 0.5
+    assert analysis.aggregate.set_index("config")["p_improve_HER"]["linear b1=0.5"] == 1.0
+
+# --- the FetchPush comparison of the paper (Figs. 2, 4, 10 and the summary) ---------------------------------------
+
+# Test success per seed: 0 until the step epoch, 1 after it, so the 50-epoch moving average at epoch
+# k > step is min(k - step, 50) / 50 (the window holds k - step successes).
+PUSH_STEPS = {"HER": (50, 60, 80), "linear b1=0.25": (40, 50, 120), "HER eps=0.874375": (45, 55, 70)}
+PUSH_SCHEDULES = {"HER": ScheduleConfig(), "linear b1=0.25": ScheduleConfig("linear", beta1=0.25),
+                  "HER eps=0.874375": ScheduleConfig(eps=0.874375)}
+# HER's minibatch shares at epoch 150 per seed (real successful, hindsight, real unsuccessful):
+# medians 0.06, 0.80, 0.14, which already sum to 1.
+HER_SHARES_150 = [(0.02, 0.80, 0.18), (0.06, 0.80, 0.14), (0.09, 0.80, 0.11)]
+PUSH_EPOCHS = 150
 
 
-def test_a_study_storage_given_on_the_command_line_is_drawn(hand_sized, tmp_path):
+@pytest.fixture(scope="module")
+def push_paper(tmp_path_factory) -> Path:
+    """The shape of conf/grid/push_paper.yaml: FetchPush HER, linear b1=0.25 and the constant
+    control at the linear schedule's mean rate, 3 seeds x 150 epochs (PUSH_STEPS curves)."""
+    folder = tmp_path_factory.mktemp("push_paper")
+    with mock.patch("os.fsync"):  # the writer's crash safety is not under test; the bytes are the same
+        for label, steps in PUSH_STEPS.items():
+            for seed, step in enumerate(steps):
+                curve = (np.arange(1, PUSH_EPOCHS + 1) > step).astype(float)
+                shares = {}
+                if label == "HER":
+                    success, hindsight, failure = HER_SHARES_150[seed]
+                    shares = dict(share_real_success=np.full(PUSH_EPOCHS, success),
+                                  share_hindsight=np.full(PUSH_EPOCHS, hindsight),
+                                  share_real_failure=np.full(PUSH_EPOCHS, failure))
+                write_run(folder / label / str(seed), make_config(schedule=PUSH_SCHEDULES[label], seed=seed,
+                                                                  epochs=PUSH_EPOCHS), curve, **shares)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def push_analysis(push_paper) -> metrics.Analysis:
+    table = load_runs(push_paper)
+    return metrics.analyse(table.runs, table.epochs, window=50)
+
+
+def test_fig4_draws_the_median_of_50_epoch_averages_and_the_range_over_seeds(push_analysis):
+    (figure,) = learning_curve_figures(push_analysis)
+    assert figure.name == "curves_push_lr1_lh1" and "vs HER and HER eps=0.874375" in figure.title
+    axes = figure.draw().axes
+    assert len(axes) == 1 and axes[0].get_title() == "linear decay (β2 = 0)"
+    axis = axes[0]
+    lines = {line.get_label(): line for line in axis.get_lines()}
+    assert set(lines) == {"HER", "HER eps=0.874375", "linear b1=0.25"}
+    her = lines["HER"]
+    # Epoch 100: HER's seeds (steps 50, 60, 80) average 50/50, 40/50 and 20/50 over epochs 51..100.
+    assert her.get_xdata()[99] == 100 and her.get_ydata()[99] == pytest.approx(0.8)
+    band = next(c for c in axis.collections if np.allclose(c.get_facecolor()[0][:3], matplotlib.colors.to_rgb(
+        her.get_color())))
+    at_100 = band.get_paths()[0].vertices
+    assert sorted(set(np.round(at_100[at_100[:, 0] == 100][:, 1], 9))) == pytest.approx([0.4, 1.0])
+
+
+def test_fig10_draws_the_mean_q_over_seeds(push_analysis):
+    (figure,) = q_figures(push_analysis)
+    axis = figure.draw().axes[0]
+    her = next(line for line in axis.get_lines() if line.get_label() == "HER")
+    # Synthetic q_mean is -10 (1 - success) - 1: at epoch 70 two HER seeds succeed (-1), one not (-11).
+    assert her.get_ydata()[69] == pytest.approx(-13 / 3)
+    assert {line.get_label() for line in axis.get_lines()} == set(PUSH_STEPS)
+
+
+def test_push_summary_equals_hand_values(push_analysis):
+    summary = push_analysis.summary.set_index("config")
+    # The median seed's average reaches 0.5 at epoch step + 25: HER's (60) at 85, the linear's (50) at 75.
+    assert summary.loc["HER", "epochs_to_0.5"] == 85 and summary.loc["linear b1=0.25", "epochs_to_0.5"] == 75
+    # Final (epoch 150) averages: HER 1, 1, 1; linear 1, 1, 0.6 (step at 120: 30 of 50 epochs).
+    assert summary.loc["linear b1=0.25", "final_median"] == pytest.approx(1.0)
+    assert summary.loc["linear b1=0.25", "iqm"] == pytest.approx(stats_trim_mean([1.0, 1.0, 0.6]))
+    assert summary.loc["linear b1=0.25", "p_improve_HER"] == pytest.approx(3 / 9)  # 6 ties of 9 pairs
+    her_median = np.median([[min(max(k - step, 0), 50) / 50 for k in range(1, 151)] for step in PUSH_STEPS["HER"]],
+                           axis=0)
+    assert summary.loc["HER", "auc"] == pytest.approx(her_median.mean())
+
+
+def stats_trim_mean(values: list[float]) -> float:
+    """IQM by hand: drop floor(n / 4) values at each end, average the rest."""
+    cut = len(values) // 4
+    return float(np.mean(sorted(values)[cut:len(values) - cut]))
+
+
+def test_composition_at_epoch_150_beside_the_papers(push_paper, tmp_path):
+    out = tmp_path / "report"
+    assert report_main([str(push_paper), "--out", str(out)]) == 0
+    table = pd.read_csv(out / "tables" / "composition_150.csv")
+    assert list(table.columns) == ["source", "config", "seeds", "epoch", "share_real_success", "share_hindsight",
+                                   "share_real_failure"]
+    paper, ours = table.to_dict("records")
+    assert (paper["source"], paper["config"], paper["epoch"]) == ("paper (Fig. 2)", "HER", 150)
+    assert [paper[c] for c in table.columns[4:]] == pytest.approx([0.053, 0.80, 0.147])
+    assert (ours["source"], ours["config"], ours["seeds"], ours["epoch"]) == ("hersd", "HER", 3, 150)
+    assert [ours[c] for c in table.columns[4:]] == pytest.approx([0.06, 0.80, 0.14])  # medians of HER_SHARES_150
+    page = (out / "index.html").read_text(encoding="utf-8")
+    figure_at, table_at = page.index('id="composition_push"'), page.index("epoch 150: hersd vs paper")
+    assert figure_at < table_at < page.index("<figure", figure_at + 1)  # right after its figure
+    (composition,) = composition_figures(metrics.analyse(*_tables(push_paper), window=50))
+    her_panel = composition.draw().axes[0]
+    assert her_panel.get_title() == "HER" and [150, 150] in [list(line.get_xdata()) for line in her_panel.get_lines()]
+
+
+def _tables(folder: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    table = load_runs(folder)
+    return table.runs, table.epochs
+
+
+def test_no_composition_table_without_her_runs_that_reached_epoch_150(push_paper, sweep, tmp_path):
+    assert report_main([str(sweep), "--out", str(tmp_path / "short"), "--task", "push"]) == 0  # 8 epochs
+    assert not (tmp_path / "short" / "tables" / "composition_150.csv").exists()
+    runs, epochs = _tables(push_paper)
+    others = metrics.analyse(runs[runs["config"] != "HER"], epochs[epochs["config"] != "HER"], window=50)
+    assert others.composition_vs_paper.empty  # the constant control (eps 0.874375) is not HER
+
+
+# --- readability ----------------------------------------------------------------------------------------------------
+
+def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
+    for threshold in (None, 0.07):
+        for schedule in (ScheduleConfig(), ScheduleConfig("linear", beta1=0.25)):
+            config = make_config(schedule=schedule, epochs=6)
+            config.task.distance_threshold = threshold
+            write_run(tmp_path / f"{threshold}-{schedule.kind}", config, np.linspace(0, 1, 6))
+    analysis = metrics.analyse(*_tables(tmp_path), window=WINDOW)
+    assert "linear b1=0.25 (task.distance_threshold=0.07)" in set(analysis.runs["config"])
+    for report_figure in learning_curve_figures(analysis) + composition_figures(analysis):
+        figure = report_figure.draw()
+        canvas = FigureCanvasAgg(figure)  # what savefig draws on
+        canvas.draw()
+        renderer = canvas.get_renderer()
+        texts = [text for legend in figure.legends for text in legend.get_texts()]
+        texts += [axis.title for axis in figure.axes] + [figure._suptitle]
+        for text in texts:
+            box = text.get_window_extent(renderer)
+            assert 0 <= box.x0 and box.x1 <= figure.bbox.x1, (report_figure.name, text.get_text())
+        assert all(len(line) <= LEGEND_CHARACTERS for legend in figure.legends for text in legend.get_texts()
+                   for line in text.get_text().splitlines())
+        for axis in figure.axes:  # a panel title no wider than its panel and the gaps beside it
+            assert axis.title.get_window_extent(renderer).width <= 1.1 * axis.get_window_extent(renderer).width
+
+
+def test_tables_leave_missing_values_empty():
+    table = pd.DataFrame({"config": ["HER"], "epochs_to_0.9": pd.array([pd.NA], dtype="Int64"), "auc": [float("nan")],
+                          "iqm": [0.12345]})
+    assert markdown_table(table).splitlines()[2] == "| HER |  |  | 0.123 |"
+    assert html_table(table).count("<td></td>") == 2 and "NA" not in html_table(table)
+    assert "<td class=text>HER</td>" in html_table(table)
+
+
+# --- worker processes -------------------------------------------------------------------------------------------
+
+def test_forked_jobs_give_the_results_in_order_and_raise_their_errors():
+    items = list(range(12))
+    assert ForkedMap(lambda x: x * x, items, workers=2).results() == [x * x for x in items]
+    assert ForkedMap(lambda x: x + 1, items, workers=1).results() == [x + 1 for x in items]  # in this process
+    with pytest.raises(ZeroDivisionError):
+        ForkedMap(lambda x: 1 / (x - 3), items, workers=2).results()
+
+
+def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch):
+    here = load_runs(sweep)  # 32 logs: fewer than load.PARALLEL_FROM, read in this process
+    monkeypatch.setattr(load, "PARALLEL_FROM", 2)
+    forked = load_runs(sweep)
+    pd.testing.assert_frame_equal(forked.runs, here.runs)
+    pd.testing.assert_frame_equal(forked.epochs, here.epochs)
+
+
+# --- Optuna study storages --------------------------------------------------------------------------------------
+
+def _make_study(storage, name: str) -> None:
     import optuna
 
-    storage = f"sqlite:///{tmp_path / 'elsewhere.sqlite'}"
-    study = optuna.create_study(study_name="given", storage=storage, direction="maximize")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
     study.enqueue_trial({"beta1": 0.25, "beta2": 0.0})
     study.optimize(lambda trial: trial.suggest_float("beta1", 0, 1) + trial.suggest_float("beta2", -1, 1), n_trials=3)
-    assert report_main([str(hand_sized), "--out", str(tmp_path / "out"), "--storage", storage]) == 0
-    assert (tmp_path / "out" / "search" / "given_beta_plane.png").exists()
-    assert "given" in (tmp_path / "out" / "index.html").read_text()
+
+
+@pytest.fixture(scope="module")
+def storages(tmp_path_factory) -> Path:
+    """study.db (SQLite, study "in_sqlite"), study.log (journal, "in_journal"), no_study.db (Optuna's
+    tables, no study), plain.db (a SQLite file of another program), notes.log (not a journal)."""
+    import optuna
+    import sqlite3
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    folder = tmp_path_factory.mktemp("storages")
+    _make_study(f"sqlite:///{folder / 'study.db'}", "in_sqlite")
+    _make_study(JournalStorage(JournalFileBackend(str(folder / "study.log"))), "in_journal")
+    optuna.storages.RDBStorage(f"sqlite:///{folder / 'no_study.db'}").remove_session()
+    with sqlite3.connect(folder / "plain.db") as connection:
+        connection.execute("CREATE TABLE notes (text)")
+    (folder / "notes.log").write_text("not a journal\n")
+    return folder
+
+
+def _bad_storages(folder: Path) -> list[tuple[str, str]]:
+    cases = [("foo://nowhere", "foo://nowhere: not a storage URL"),
+             ("/no/such/study.db", "/no/such/study.db: no such study storage"),
+             (f"sqlite:///{folder / 'no_study.db'}", "no Optuna study in this storage"),
+             (str(folder / "plain.db"), f"{folder / 'plain.db'}: no Optuna study in this storage"),
+             (f"journal:{folder / 'notes.log'}", "not a readable Optuna journal")]
+    return cases
+
+
+@pytest.mark.parametrize("case", range(5))
+def test_a_bad_storage_is_one_line_and_exit_2_before_any_log_is_read(hand_sized, storages, tmp_path, capsys, case):
+    storage, message = _bad_storages(storages)[case]
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "out"), "--storage", storage]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("hersd-report: error: --storage ") and message in err, err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("url", ["postgresql+psycopg2://user:secret@127.0.0.1:1/none",
+                                 "postgresql://user:secret@127.0.0.1:1/none"])  # psycopg2 for the bare scheme
+def test_an_unreachable_database_is_one_line_without_its_password(hand_sized, tmp_path, capsys, monkeypatch, url):
+    pytest.importorskip("psycopg2")  # hersd[cluster]
+    monkeypatch.setitem(sys.modules, "psycopg", None)  # SQLAlchemy's default driver for postgresql://, not installed
+    assert report_main([str(hand_sized), "--out", str(tmp_path), "--storage", url]) == 2  # nothing listens on port 1
+    err = capsys.readouterr().err
+    shown = url.replace("secret", "***")
+    assert err.count("\n") == 1 and f"cannot reach the database at {shown} (connection to server" in err, err
+    assert "secret" not in err
+
+
+def test_a_missing_database_driver_says_what_to_install(hand_sized, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "psycopg2", None)  # as if not installed
+    assert report_main([str(hand_sized), "--out", str(tmp_path), "--storage", "postgresql+psycopg2://u@db/x"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and 'the database driver is missing (psycopg2); pip install "hersd[cluster]"' in err
+
+
+def _files(folder: Path) -> dict[str, tuple[bytes, int]]:
+    return {path.name: (path.read_bytes(), path.stat().st_mtime_ns) for path in folder.iterdir()}
+
+
+def test_storages_are_opened_read_only(storages):
+    before = _files(storages)
+    for spec in ("study.db", "study.log"):
+        opened = open_study_storage(storages / spec)
+        assert opened.study_names == ["in_sqlite" if spec.endswith(".db") else "in_journal"]
+        import optuna
+
+        assert len(optuna.load_study(study_name=opened.study_names[0], storage=opened.storage).trials) == 3
+    with pytest.raises(StudyStorageError):  # refused before Optuna could create its tables
+        open_study_storage(storages / "plain.db")
+    assert _files(storages) == before  # not a byte, not a time stamp, no new file (no -journal, -wal, .lock)
+
+
+def test_given_storages_are_drawn(hand_sized, storages, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert report_main([str(hand_sized), "--out", str(out), "--storage", f"sqlite:///{storages / 'study.db'}",
+                        "--storage", f"journal:{storages / 'study.log'}"]) == 0
+    assert sorted(path.name for path in (out / "search").iterdir()) == sorted(
+        f"{name}_{suffix}" for name in ("in_sqlite", "in_journal")
+        for suffix in ("beta_plane.png", "best_trials.csv", "best_trials.md"))
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "Optuna searches" in page and "Best trials: in_journal" in page and "Best trials: in_sqlite" in page
+    assert capsys.readouterr().err == ""
+
+
+def test_storages_in_the_search_folder_are_found_and_a_bad_one_is_skipped(storages, tmp_path, capsys):
+    write_run(tmp_path / "run", make_config(), np.linspace(0, 1, 6))
+    (tmp_path / "search").mkdir()
+    for name in ("study.db", "study.log", "plain.db"):
+        (tmp_path / "search" / name).write_bytes((storages / name).read_bytes())
+    assert report_main([str(tmp_path), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    plain = tmp_path / "search" / "plain.db"
+    assert err == [f"warning: skipped study storage {plain}: no Optuna study in this storage"]
+    assert {path.name for path in (tmp_path / "out" / "search").glob("*.png")} == {
+        "in_sqlite_beta_plane.png", "in_journal_beta_plane.png"}
+    assert "study storage" in (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
+
+
+def test_the_search_figures_command_reports_a_bad_storage_in_one_line(storages, tmp_path, capsys):
+    from analysis.search_figures import main as search_figures_main
+
+    assert search_figures_main([str(storages / "plain.db"), str(tmp_path)]) == 2
+    assert search_figures_main([str(storages / "study.db"), str(tmp_path), "--study", "other"]) == 2
+    assert capsys.readouterr().err.count("\n") == 2
+    assert search_figures_main([str(storages / "study.db"), str(tmp_path)]) == 0

@@ -70,3 +70,17 @@ def test_light_modules_import_without_torch_or_mujoco():
             "heavy = [m for m in ('torch', 'mujoco', 'gymnasium_robotics') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_no_function_is_longer_than_60_lines_without_a_reason():
+    """A longer function must say why on its ``def`` line (a comment containing 'long:')."""
+    too_long = []
+    for package in LAYERS:
+        for path in (ROOT / package).rglob("*.py"):
+            lines = path.read_text().splitlines()
+            for node in ast.walk(ast.parse("\n".join(lines))):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    length = node.end_lineno - node.lineno + 1
+                    if length > 60 and "long:" not in lines[node.lineno - 1]:
+                        too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({length} lines)")
+    assert not too_long, too_long

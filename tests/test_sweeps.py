@@ -144,3 +144,17 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
     assert "1 done" in result.stdout and "1 running elsewhere" in result.stdout and "0 failed" in result.stdout
     assert not (held / "run.mcap").exists()
     assert read_run(next(tmp_path.rglob("seed1-*/run.mcap"))).meta["threads"] == 1  # an explicit count wins
+
+
+def test_threads_auto_per_launcher():
+    """joblib shares this machine's cores among its runs in flight; a SLURM job gets its own allocation."""
+    from omegaconf import OmegaConf
+
+    from sweeps.launch import auto_threads
+
+    slurm = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
+    joblib = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
+    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": 4}), n_runs=10) == 4
+    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": None}), n_runs=10) == 1
+    assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": 1}), n_runs=10) == available_cores()
+    assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": -1}), n_runs=1) == available_cores()

@@ -37,6 +37,7 @@ def test_log_holds_metadata_and_every_epoch(tmp_path):
     assert np.allclose(log.epochs["relabel_rate"], [1 - 0.5 / 3, 1 - 1 / 3, 0.5])
     shares = log.epochs[["share_hindsight", "share_real_success", "share_real_failure"]].sum(axis=1)
     assert np.allclose(shares, 1.0)
+    assert ((log.epochs["test_distance"] > 0) & (log.epochs["test_distance"] < 1)).all()  # metres on FetchReach
     assert list(log.epochs["env_steps"]) == [200, 400, 600]  # 2 cycles x 2 episodes x 50 steps
     assert list(log.epochs["updates"]) == [10, 20, 30]
     assert log.meta["config"]["schedule"] == {"kind": "linear", "eps": 0.8, "beta1": 0.5, "beta2": 0.0,
@@ -228,6 +229,10 @@ def test_fetch_reach_learns_within_5_epochs(tmp_path, seed):
     log = read_run(train(compose(["task=reach", "epochs=5", f"seed={seed}", "quiet=true",
                                   f"results_dir={tmp_path}"])))
     assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()
+    # FetchReach counts a success within 5 cm: all-successful epochs end closer than that on average
+    solved = log.epochs["test_success"] == 1.0
+    assert (log.epochs.loc[solved, "test_distance"] < 0.05).all(), log.epochs["test_distance"].tolist()
+    assert log.epochs["test_distance"].min() < log.epochs["test_distance"].iloc[0]
 
 
 def test_log_is_standard_mcap_whose_messages_follow_their_json_schemas(tmp_path):

@@ -1,0 +1,56 @@
+"""Spreading the report's independent jobs (reading logs, drawing figures) over the cores.
+
+:class:`ForkedMap` runs ``function(item)`` for every item in forked worker processes, one per
+core: a forked child starts with the parent's memory (the loaded tables, the imported
+modules), so the jobs themselves are never pickled, only their results. With one core, one
+job, or no ``fork`` on the platform, the jobs run in this process instead, with the same results.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from typing import Any, Callable, Sequence
+
+_JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # what the forked children inherit
+
+
+def available_cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _run_job(index: int) -> Any:
+    function, items = _JOBS
+    return function(items[index])
+
+
+class ForkedMap:
+    """``[function(item) for item in items]``, computed in up to ``workers`` forked processes
+    (default: one per core), started at once; :meth:`results` waits for them, in item order."""
+
+    def __init__(self, function: Callable[[Any], Any], items: Sequence[Any], workers: int | None = None) -> None:
+        global _JOBS
+        self._function, self._items = function, items
+        workers = min(workers or available_cores(), len(items))
+        self._pool = None
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            _JOBS = (function, items)
+            self._pool = multiprocessing.get_context("fork").Pool(workers)  # the children fork here
+            self._pending = self._pool.map_async(_run_job, range(len(items)), chunksize=1)
+
+    def results(self) -> list[Any]:
+        global _JOBS
+        if self._pool is None:
+            return [self._function(item) for item in self._items]
+        try:
+            results = self._pending.get()
+            self._pool.close()  # every job is done: let the workers exit
+            return results
+        finally:
+            self._pool.terminate()  # after close(), only reaps; after an error, stops the other jobs
+            self._pool.join()
+            _JOBS = None

@@ -1,0 +1,15 @@
+"""``hersd-search``: an Optuna search of the relabel-rate schedule over the ordinary run store
+(docs/SEARCH.md).
+
+Modules, each importing only those before it: ``config`` (the SearchConfig schema and its
+checks), ``storage`` (where a study lives), ``plan`` (what every worker receives; a trial's
+run configs), ``study`` (create/load, sampler, pruner, lost trials), ``objective`` (one
+trial's runs, reports and pruning), ``workers`` (local processes, SLURM), ``cli`` (the command).
+"""
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``hersd-search`` (:func:`sweeps.search.cli.main`), for scripts installed as ``sweeps.search:main``."""
+    from sweeps.search.cli import main as cli_main
+
+    cli_main(argv)

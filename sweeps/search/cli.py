@@ -1,0 +1,150 @@
+"""``hersd-search``, the command (entry point ``sweeps.search.cli:main``): compose the search
+and training configs, open the study, re-enqueue lost trials, run or submit the workers, and
+print the outcome with the ``hersd-report`` command that draws the study (the search never
+imports the analysis: data flows search -> storage -> report).
+
+Exit codes: 0 done (or jobs submitted), 1 a worker process died, 2 bad input (one line on
+stderr, before any work) or a run the training layer refused, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import NoReturn
+
+import optuna
+from optuna.storages import BaseStorage
+
+from hersd.config import ConfigError
+from sweeps.search.config import compose_search
+from sweeps.search.plan import SearchPlan, make_plan
+from sweeps.search.storage import SEARCH_FOLDER, open_storage, shown, storage_file
+from sweeps.search.study import count_finished, open_study, requeue_lost_trials, trial_counts
+from sweeps.search.workers import check_slurm, run_local, split_trials, submit_slurm
+
+USAGE = """usage: hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OVERRIDES ...]
+
+Optuna search of the relabel-rate schedule (beta1, beta2; optionally lambda_h and the kind).
+Each trial trains one run per seed through the run store; re-running the same command
+resumes the study. search.* settings: conf/search/default.yaml and sweeps/search/config.py;
+every other override goes to the training config as for hersd-train (task=reach epochs=50 ...).
+
+  search=default|wide|ci        search.n_trials=50  search.n_jobs=2  search.seeds=3
+  search.objective=auc|final    search.pruner.kind=median|hyperband|none
+  search.space.beta2.low=-1     search.storage=journal:/shared/hersd/study.log
+  search.launcher=slurm         search.slurm.partition=<name>
+
+The study's figures and tables: hersd-report <results_dir> (printed at the end of each search).
+"""
+REPORT_REMOVED = ("--report was removed: hersd-search no longer draws figures; draw the study with "
+                  "hersd-report <results_dir> (plus --storage <URL> for a search.storage outside "
+                  "<results_dir>/search), the command every search prints at its end")
+# Storage files hersd-report reads by itself: directly in <results_dir>/search/ with these suffixes.
+REPORT_FINDS = (".db", ".sqlite", ".sqlite3", ".log", ".journal")
+
+
+def _fail(message: str, code: int = 2) -> NoReturn:
+    """One error line on stderr, then exit with ``code``."""
+    print(f"hersd-search: error: {message}", file=sys.stderr)
+    sys.exit(code)
+
+
+def split_overrides(argv: list[str]) -> tuple[str, list[str], list[str]]:
+    """Command-line arguments -> (search file name, ``search.*`` overrides, training overrides)."""
+    search_overrides, train_overrides = [], []
+    search_name = "default"
+    for arg in argv:
+        key = arg.split("=", 1)[0].lstrip("+")
+        if key == "search":
+            search_name = arg.split("=", 1)[1] if "=" in arg else ""
+        elif key.startswith("search."):
+            search_overrides.append(arg)
+        elif arg.startswith("-"):
+            raise ConfigError(REPORT_REMOVED if arg == "--report" else f"unknown option {arg}; see hersd-search --help")
+        else:
+            train_overrides.append(arg)
+    return search_name, search_overrides, train_overrides
+
+
+def report_command(plan: SearchPlan) -> str:
+    """The ``hersd-report`` command that draws this study (and every run of the results folder)."""
+    results = Path(plan.base.results_dir).resolve()
+    command = ["hersd-report", str(results)]
+    path = storage_file(plan.storage)
+    if path is None or path.parent != results / SEARCH_FOLDER or path.suffix not in REPORT_FINDS:
+        command += ["--storage", shown(plan.storage)]  # a password shows as ***: libpq also reads PGPASSWORD
+    return shlex.join(command)
+
+
+def start(argv: list[str]) -> tuple[SearchPlan, BaseStorage, optuna.Study]:
+    """Parse, compose, plan, open the storage and the study; ConfigError (one line) on bad input."""
+    search_name, search_overrides, train_overrides = split_overrides(argv)
+    plan = make_plan(compose_search(search_name, search_overrides), train_overrides, search_name)
+    if plan.search.launcher == "slurm":
+        check_slurm(plan.search.slurm)
+    storage = open_storage(plan.storage)
+    return plan, storage, open_study(plan, storage)
+
+
+def launch(plan: SearchPlan, storage: BaseStorage, study: optuna.Study) -> list[int] | None:
+    """Re-enqueue lost trials, then run the local workers (-> exit codes) or submit SLURM jobs (-> None)."""
+    requeued = requeue_lost_trials(study, storage, plan.search.stale_after_minutes * 60)
+    if requeued:
+        print(f"re-enqueued the parameters of lost trials {requeued}", flush=True)
+    finished = count_finished(study)
+    remaining = plan.search.n_trials - finished
+    if remaining <= 0:
+        print(f"the study already holds {finished} complete or pruned trials (search.n_trials="
+              f"{plan.search.n_trials}); nothing to run", flush=True)
+        return []
+    shares = split_trials(remaining, plan.search.n_jobs)
+    trials_before = len(study.get_trials(deepcopy=False))
+    print(f"{finished} of {plan.search.n_trials} trials finished; running {remaining} on "
+          f"{len(shares)} {plan.search.launcher} worker(s)", flush=True)
+    if plan.search.launcher == "slurm":
+        job_ids = submit_slurm(plan, shares, trials_before)
+        print(f"submitted SLURM jobs {', '.join(job_ids)}; logs in {plan.study_dir}/slurm. Once they end, draw "
+              f"the study with: {report_command(plan)} (re-run this command to resume a search cut short)")
+        return None
+    return run_local(plan, shares, trials_before)
+
+
+def summarise(plan: SearchPlan, storage: BaseStorage) -> None:
+    """Print the trial counts, the best trial, and the commands that show the study."""
+    study = optuna.load_study(study_name=plan.study_name, storage=storage)
+    counts = trial_counts(study)
+    print(f"trials: {', '.join(f'{n} {state}' for state, n in counts.items())}")
+    if counts["complete"]:
+        best = study.best_trial
+        print(f"best: trial {best.number}, value {best.value:.4f}, params {best.params}")
+    print(f"figures and tables: {report_command(plan)}")
+    target = shown(plan.storage) if "://" in plan.storage else str(storage_file(plan.storage))  # URL or journal
+    print(f"dashboard: pip install optuna-dashboard; optuna-dashboard {shlex.quote(target)}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OVERRIDES ...]``."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if any(arg in ("-h", "--help") for arg in argv):
+        print(USAGE)
+        return
+    try:
+        plan, storage, study = start(argv)
+        print(f"study {plan.study_name} in {shown(plan.storage)}", flush=True)
+        worker_codes = launch(plan, storage, study)
+    except ConfigError as err:
+        _fail(str(err))
+    except KeyboardInterrupt:
+        print("hersd-search: interrupted; re-run the same command to resume", file=sys.stderr)
+        sys.exit(130)
+    if worker_codes is None:  # SLURM jobs submitted
+        return
+    summarise(plan, storage)
+    failed = [code for code in worker_codes if code != 0]
+    if 2 in failed:
+        _fail("a worker stopped because a run was refused (the line above); fix the input and re-run")
+    if failed:
+        _fail(f"{len(failed)} worker(s) exited abnormally (codes {failed}); re-run the same command to resume",
+              code=1)

@@ -1,0 +1,274 @@
+"""The search's own settings: the :class:`SearchConfig` schema (Hydra's ConfigStore entry
+``search/search_schema``, which every ``conf/search/*.yaml`` lists first), its range checks,
+and its composition from ``conf/search/<name>.yaml`` plus ``search.*`` overrides.
+
+Every check raises :class:`hersd.config.ConfigError` with one line naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from hersd.compose import compose, explain_config_error, group_options, register_schema as store_schema
+from hersd.config import ConfigError, ScheduleConfig
+from hersd.resources import available_cores
+from hersd.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
+from hersd.schedules import FIXED_KINDS
+
+OBJECTIVES = ("auc", "final")
+PRUNERS = ("median", "hyperband", "none")
+LAUNCHERS = ("local", "slurm")
+METRICS = tuple(name for name, (kind, _) in EPOCH_FIELDS.items()
+                if kind == "number" and name not in OPTIONAL_EPOCH_FIELDS)
+# The schedule kinds a search can draw (eq. 9's, known before the run; not `success`) and the
+# parameters it draws for each.
+KIND_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
+assert tuple(KIND_PARAMS) == FIXED_KINDS
+PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")
+MAX_SLURM_JOBS = 10_000  # worker jobs of one search (SLURM's array limit is usually lower: sbatch says so)
+STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,199}")  # it names files: <study>.db, <study>/
+
+
+@dataclass
+class Bounds:
+    """A searched range of one parameter."""
+
+    low: float  # smallest value tried
+    high: float  # largest value tried
+    log: bool = False  # sample on a log scale (needs low > 0)
+
+
+@dataclass
+class SpaceConfig:
+    """What the search draws: the schedule kinds and each parameter's range."""
+
+    kinds: list[str] = field(default_factory=lambda: ["exponential"])  # schedule kinds searched (a categorical if > 1)
+    beta1: Bounds = field(default_factory=lambda: Bounds(0.0, 1.0))  # eq. 9 final drop, within [0, 1]
+    beta2: Bounds = field(default_factory=lambda: Bounds(-2.0, 2.0))  # eq. 9 shape (exponential kind only)
+    eps: Bounds = field(default_factory=lambda: Bounds(0.5, 1.0))  # fixed rate (constant kind only)
+    lambda_h: Optional[Bounds] = None  # hindsight reward weight (eq. 8); null keeps the algo's
+
+
+@dataclass
+class SamplerConfig:
+    """Optuna's TPE sampler."""
+
+    seed: int = 0  # TPE seed; each worker's is derived from it, its index and the study's size
+    n_startup_trials: int = 10  # random trials before TPE models the results
+    multivariate: bool = True  # model beta1 and beta2 jointly (they trade off along mu_eps iso-lines)
+
+
+@dataclass
+class PrunerConfig:
+    """The pruner that may stop a trial after any epoch."""
+
+    kind: str = "median"  # median | hyperband | none
+    n_startup_trials: int = 5  # median: finished trials before any pruning
+    n_warmup_steps: int = 5  # median: steps (epochs) a trial always runs
+    min_resource: int = 5  # hyperband: steps every trial runs
+    reduction_factor: int = 3  # hyperband: 1/reduction_factor of the trials go on at each rung
+
+
+@dataclass
+class SlurmConfig:
+    """The worker jobs of search.launcher=slurm."""
+
+    # null takes the value of hersd-sweep's preset (hydra/launcher/slurm.yaml in the hersd.conf package).
+    partition: Optional[str] = None  # SLURM partition
+    timeout_min: Optional[int] = None  # minutes per worker job; a worker runs many trials
+    cpus_per_task: Optional[int] = None  # CPUs per worker job (its runs use them all with threads=auto)
+    mem_gb: Optional[int] = None  # memory per worker job
+
+
+@dataclass
+class SearchConfig:
+    """Every ``search.*`` setting (conf/search/*.yaml holds only what differs from these defaults)."""
+
+    study_name: Optional[str] = None  # null: <task>-<algo>-<search file>-<hash of what the objective depends on>
+    storage: Optional[str] = None  # null: sqlite under <results_dir>/search; or a SQLAlchemy URL, or journal:<path>
+    n_trials: int = 50  # complete + pruned trials the study should hold
+    n_jobs: int = 1  # worker processes (local, at most one per core) or SLURM jobs sharing the study
+    launcher: str = "local"  # local | slurm
+    seeds: int = 1  # runs per trial, seeds first_seed .. first_seed + seeds - 1, trained one after another
+    first_seed: int = 0
+    objective: str = "auc"  # auc: mean of the metric over epochs; final: its value at the last epoch
+    metric: str = "test_success"  # the per-epoch field the objective is made of (maximised)
+    stale_after_minutes: float = 30.0  # a RUNNING trial without a heartbeat (one per epoch) for this long is lost
+    space: SpaceConfig = field(default_factory=SpaceConfig)
+    sampler: SamplerConfig = field(default_factory=SamplerConfig)
+    pruner: PrunerConfig = field(default_factory=PrunerConfig)
+    slurm: SlurmConfig = field(default_factory=SlurmConfig)
+    enqueue: list[dict[str, Any]] = field(default_factory=list)  # parameter sets tried first, when the study is created
+
+
+def _check(condition: bool, message: str) -> None:
+    """Raise ConfigError(message) unless ``condition``."""
+    if not condition:
+        raise ConfigError(message)
+
+
+def _is_number(value: Any) -> bool:
+    """A finite int or float (not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    """ConfigError naming the choices unless ``value`` is one of them."""
+    _check(value in choices, f"{name}={value!r} is unknown; choose one of: {', '.join(choices)}")
+
+
+def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
+    """The ranges the search draws from, by parameter name (unused ranges left out)."""
+    names = [name for kind in space.kinds for name in KIND_PARAMS[kind]]
+    named = {name: getattr(space, name) for name in dict.fromkeys(names)}
+    return {**named, "lambda_h": space.lambda_h} if space.lambda_h is not None else named
+
+
+def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
+    """The schedule's own checks (:class:`ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
+    try:
+        ScheduleConfig(kind=kind, **{name: float(params[name]) for name in KIND_PARAMS[kind] if name in params})
+    except ConfigError as err:
+        raise ConfigError(f"{where}: {err}") from None
+
+
+def check_space(space: SpaceConfig) -> None:
+    """Kinds known and distinct; each searched range finite, ordered, loggable, and valid for the schedule."""
+    kinds = list(space.kinds)
+    _check(bool(kinds) and len(set(kinds)) == len(kinds) and set(kinds) <= set(KIND_PARAMS),
+           f"search.space.kinds must be a non-empty list of distinct kinds among {', '.join(KIND_PARAMS)} "
+           f"(success schedules are not searched: their rate is known only once run); got {kinds}")
+    for name, bounds in searched_bounds(space).items():
+        where = f"search.space.{name}"
+        _check(_is_number(bounds.low) and _is_number(bounds.high),
+               f"{where}: bounds must be finite numbers, got [{bounds.low}, {bounds.high}]")
+        _check(bounds.low <= bounds.high, f"{where}: low ({bounds.low}) must be <= high ({bounds.high})")
+        _check(not bounds.log or bounds.low > 0, f"{where}: log=true needs low > 0, got {bounds.low}")
+        for kind in (k for k in kinds if name in KIND_PARAMS[k]):
+            for end in ("low", "high"):
+                check_schedule(kind, {name: getattr(bounds, end)}, f"{where}.{end}={getattr(bounds, end)}")
+    if space.lambda_h is not None:
+        _check(space.lambda_h.low > 0, f"search.space.lambda_h: low must be > 0, got {space.lambda_h.low}")
+
+
+def check_counts(search: SearchConfig) -> None:
+    """Trials, workers, seeds, staleness and the pruner's and sampler's integers in range."""
+    for name in ("n_trials", "n_jobs", "seeds"):
+        _check(getattr(search, name) >= 1, f"search.{name} must be >= 1, got {getattr(search, name)}")
+    cores = available_cores()
+    _check(search.launcher != "local" or search.n_jobs <= cores,
+           f"search.n_jobs={search.n_jobs}: local workers are processes of this machine, which has {cores} "
+           f"core(s); use search.n_jobs<={cores}, or search.launcher=slurm")
+    _check(search.first_seed >= 0, f"search.first_seed must be >= 0, got {search.first_seed}")
+    _check(search.stale_after_minutes > 0,  # NaN fails too
+           f"search.stale_after_minutes must be > 0 (longer than an epoch), got {search.stale_after_minutes}")
+    _check(search.sampler.seed >= 0, f"search.sampler.seed must be >= 0, got {search.sampler.seed}")
+    _check(search.sampler.n_startup_trials >= 0,
+           f"search.sampler.n_startup_trials must be >= 0, got {search.sampler.n_startup_trials}")
+    pruner = search.pruner
+    _check(pruner.n_startup_trials >= 0 and pruner.n_warmup_steps >= 0,
+           "search.pruner.n_startup_trials and search.pruner.n_warmup_steps must be >= 0")
+    _check(pruner.min_resource >= 1 and pruner.reduction_factor >= 2,
+           "search.pruner.min_resource must be >= 1 and search.pruner.reduction_factor >= 2")
+    _check(search.launcher != "slurm" or search.n_jobs <= MAX_SLURM_JOBS,
+           f"search.n_jobs={search.n_jobs}: at most {MAX_SLURM_JOBS} SLURM worker jobs (each runs many trials)")
+    for name, value in vars(search.slurm).items():
+        _check(value is None or name == "partition" or value >= 1, f"search.slurm.{name} must be >= 1 or null")
+
+
+def enqueued_kind(params: dict[str, Any], kinds: list[str]) -> str | None:
+    """An enqueued set's kind: given, the only one searched, or the one whose parameters cover the set's; else None."""
+    # e.g. with kinds [linear, exponential]: {beta1, beta2} is exponential, {beta1} is ambiguous
+    if "kind" in params or len(kinds) == 1:
+        return params.get("kind", kinds[0])
+    names = set(params) - {"lambda_h"}
+    fitting = [kind for kind in kinds if names <= set(KIND_PARAMS[kind])]
+    return fitting[0] if len(fitting) == 1 else None
+
+
+def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
+    """An enqueued set as Optuna gets it: with its kind when the kind is a searched parameter."""
+    return {"kind": enqueued_kind(params, kinds), **params} if len(kinds) > 1 else dict(params)
+
+
+def check_enqueue(search: SearchConfig) -> None:
+    """Each enqueued set: a searched kind, only that kind's parameters, finite numbers the schedule accepts."""
+    # Sets may lie outside the searched ranges (a narrowed search keeps its file's sets): Optuna warns and tries them.
+    kinds = list(search.space.kinds)
+    for index, params in enumerate(search.enqueue):
+        where = f"search.enqueue[{index}]"
+        kind = enqueued_kind(params, kinds)
+        _check(kind in kinds, f"{where}: kind={params.get('kind')!r} is not among search.space.kinds {kinds}"
+               if "kind" in params else f"{where}: say which kind it is (kind: one of {kinds})")
+        allowed = KIND_PARAMS[kind] + (("lambda_h",) if search.space.lambda_h is not None else ())
+        extra = sorted(map(str, set(params) - {"kind", *allowed}))
+        _check(not extra, f"{where}: {', '.join(extra)} not searched for kind {kind}; its parameters: "
+                          f"{', '.join(allowed)}")
+        for name in allowed:
+            _check(name not in params or _is_number(params[name]),
+                   f"{where}.{name} must be a finite number, got {params.get(name)!r}")
+        check_schedule(kind, params, where)
+        _check(params.get("lambda_h", 1.0) > 0, f"{where}.lambda_h must be > 0, got {params.get('lambda_h')}")
+
+
+def validate(search: SearchConfig) -> None:
+    """Raise :class:`ConfigError` (one line) on the first out-of-range setting."""
+    check_space(search.space)
+    check_counts(search)
+    _choice("search.objective", search.objective, OBJECTIVES)
+    _choice("search.metric", search.metric, METRICS)
+    _choice("search.launcher", search.launcher, LAUNCHERS)
+    _choice("search.pruner.kind", search.pruner.kind, PRUNERS)
+    check_enqueue(search)
+    _check(search.study_name is None or bool(STUDY_NAME.fullmatch(search.study_name)),
+           f"search.study_name={search.study_name!r}: use 1-200 letters, digits, '.', '_' or '-' (it names files)")
+    _check(search.storage is None or bool(search.storage.strip()),
+           "search.storage is empty; leave it null for the default SQLite file")
+
+
+def register_schema() -> None:
+    """Put :class:`SearchConfig` in Hydra's ConfigStore as ``search/search_schema``."""
+    store_schema("search_schema", SearchConfig, group="search")
+
+
+def _merge_at_parent(override: str) -> str:
+    """``search.a.b={...}`` -> ``search.a={b: {...}}``, the same merge made from the parent node."""
+    # OmegaConf 2.3 cannot merge a mapping into a null structured node (search.space.lambda_h) by the
+    # node's own key (AttributeError), but can from its parent.
+    key, sep, value = override.partition("=")
+    parent, _, leaf = key.rpartition(".")
+    if not sep or not value.lstrip().startswith("{") or parent.count(".") < 1 or key.startswith(("+", "~")):
+        return override
+    return f"{parent}={{{leaf}: {value}}}"
+
+
+def compose_search(search_name: str, overrides: list[str]) -> SearchConfig:
+    """``conf/search/<search_name>.yaml`` + ``search.*`` overrides -> validated :class:`SearchConfig`."""
+    from hydra.errors import HydraException, MissingConfigException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    register_schema()
+    try:
+        composed = compose(None, [f"+search={search_name}", *map(_merge_at_parent, overrides)],
+                           job_name="hersd-search")
+        search = OmegaConf.to_object(composed.search)
+    except MissingConfigException:
+        raise ConfigError(f"search={search_name} is not a known search; choose one of: "
+                          f"{', '.join(group_options('search'))}") from None
+    except (HydraException, OmegaConfBaseException) as err:
+        raise ConfigError(_composition_error(err)) from None
+    validate(search)
+    return search
+
+
+def _composition_error(err: Exception) -> str:
+    """A Hydra/OmegaConf error while composing the search -> one line naming the ``search.*`` field."""
+    cause = err.__cause__ if err.__cause__ is not None else err
+    key = getattr(cause, "full_key", None) or ""
+    if key.startswith("search.enqueue") or str(err).startswith("Error merging override search.enqueue"):
+        return "search.enqueue must be a list of mappings like [{beta1: 0.25, beta2: 0.25}]"
+    return explain_config_error(err, what="search setting", see="conf/search/default.yaml")

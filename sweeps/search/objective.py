@@ -1,0 +1,162 @@
+"""One trial: draw its schedule, train its runs (one per seed, in turn) through
+:func:`hersd.train.train`, and report its running objective after every epoch so that the
+pruner can stop it there (a stopped run stays resumable).
+
+The running objective is the mean over the seeds already finished plus the current seed's
+objective so far, reported at step ``seed_index * epochs + epoch``; a non-finite one prunes
+the trial.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import socket
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+
+from hersd.config import ConfigError, TrainConfig
+from hersd.runlog import LOG_NAME, read_records
+from hersd.runstore import run_dir
+from hersd.schedules import schedule_mean_rates
+from sweeps.search.config import KIND_PARAMS, SpaceConfig
+from sweeps.search.plan import SearchPlan, param_overrides, trial_config
+
+
+def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
+    """Draw a trial's schedule -> {"kind", then "eps" | "beta1" [, "beta2"] by kind [, "lambda_h"]: float}."""
+    kinds = list(space.kinds)
+    kind = trial.suggest_categorical("kind", kinds) if len(kinds) > 1 else kinds[0]
+    params: dict[str, Any] = {"kind": kind}
+    for name in KIND_PARAMS[kind] + (("lambda_h",) if space.lambda_h is not None else ()):
+        bounds = getattr(space, name)
+        params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)
+    return params
+
+
+def mean_rates(params: dict[str, Any], epochs: int) -> tuple[float, float]:
+    """mu_eps of a trial's schedule: exact over its epochs (eq. 10) and the approximation (eq. 11)."""
+    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
+
+
+def seed_objective(values: np.ndarray, objective: str) -> float:
+    """One run's objective from its per-epoch metric values so far (shape (epochs,)): mean or last."""
+    return float(np.mean(values)) if objective == "auc" else float(values[-1])
+
+
+def metric_values(log_path: Path, metric: str, up_to_epoch: int | None = None) -> np.ndarray:
+    """The metric of epochs 1..up_to_epoch (all if None) from a run's log -> shape (epochs,), null as NaN."""
+    records = read_records(log_path).records
+    return np.array([np.nan if record[metric] is None else record[metric] for record in records
+                     if up_to_epoch is None or record["epoch"] <= up_to_epoch], dtype=float)
+
+
+class TrialProgress:
+    """Reports a trial's running objective at step ``seed_index * epochs + epoch`` and prunes.
+
+    Steps a resumed run skipped (already in its log) are reported from the log.
+    """
+
+    def __init__(self, trial: optuna.Trial, objective: str, epochs: int) -> None:
+        """Nothing reported yet; ``objective`` is auc or final, ``epochs`` is K."""
+        self.trial = trial
+        self.objective = objective
+        self.epochs = epochs
+        self.seed_values: list[float] = []
+        self.reported: set[int] = set()
+
+    def _prune(self, reason: str) -> None:
+        """Stop the trial as pruned, recording why."""
+        self.trial.set_user_attr("pruned_reason", reason)
+        raise optuna.TrialPruned(reason)
+
+    def update(self, seed_index: int, values: np.ndarray, may_prune: bool) -> None:
+        """Report every unreported step of seed ``seed_index`` up to ``len(values)``; maybe prune."""
+        for epoch in range(1, len(values) + 1):
+            step = seed_index * self.epochs + epoch
+            if step in self.reported:
+                continue
+            running = float(np.mean(self.seed_values + [seed_objective(values[:epoch], self.objective)]))
+            if not np.isfinite(running):
+                self._prune(f"non-finite objective at step {step}")
+            self.trial.report(running, step)
+            self.reported.add(step)
+        if may_prune and self.trial.should_prune():
+            self._prune(f"pruner at step {max(self.reported)}")
+
+    def finish_seed(self, values: np.ndarray) -> None:
+        """Record a finished run's objective (a non-finite one prunes the trial)."""
+        value = seed_objective(values, self.objective)
+        if not np.isfinite(value):
+            self._prune("non-finite objective")
+        self.seed_values.append(value)
+
+    def value(self) -> float:
+        """The trial's objective: the mean over the finished seeds."""
+        return float(np.mean(self.seed_values))
+
+
+def _heartbeat(trial: optuna.Trial) -> None:
+    """Record that the trial's worker is alive now (user attribute ``heartbeat``, a Unix time)."""
+    trial.set_user_attr("heartbeat", time.time())
+
+
+def run_command(plan: SearchPlan, trial_number: int, params: dict[str, Any], cfg: TrainConfig) -> str:
+    """The run's ``command`` in its log: the search's trial and the equivalent ``hersd-train`` command."""
+    overrides = [*plan.train_overrides, *param_overrides(params), f"seed={cfg.seed}"]
+    if plan.base.threads == "auto":
+        overrides.append(f"threads={cfg.threads}")
+    return f"hersd-search study={plan.study_name} trial={trial_number}: hersd-train {shlex.join(overrides)}"
+
+
+def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, params: dict[str, Any],
+               cfg: TrainConfig, seed_index: int) -> None:
+    """Train (or resume, or find complete) one run of the trial, reporting each epoch; record its objective."""
+    from hersd.train import train  # torch and MuJoCo: only in the processes that train
+
+    metric, epochs = plan.search.metric, plan.epochs
+    log_path = run_dir(cfg) / LOG_NAME
+
+    def on_epoch(record: dict) -> None:
+        """After each logged epoch: heartbeat, report the steps so far, maybe prune."""
+        _heartbeat(trial)
+        progress.update(seed_index, metric_values(log_path, metric, record["epoch"]), record["epoch"] < epochs)
+
+    train(cfg, command=run_command(plan, trial.number, params, cfg), on_epoch=on_epoch)
+    values = metric_values(log_path, metric)
+    if len(values) != epochs:
+        raise RuntimeError(f"{log_path} holds {len(values)} of {epochs} epochs after training")
+    progress.update(seed_index, values, may_prune=seed_index < plan.search.seeds - 1)
+    progress.finish_seed(values)
+
+
+def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: list[str] | None = None) -> float:
+    """Train the trial's runs (one per seed, in turn, ``threads`` each) -> the mean of their objectives."""
+    trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
+    _heartbeat(trial)
+    params = suggest_params(trial, plan.search.space)
+    mu_exact, mu_approx = mean_rates(params, plan.epochs)
+    trial.set_user_attr("mu_eps", mu_exact)
+    trial.set_user_attr("mu_eps_approx", mu_approx)
+    progress = TrialProgress(trial, plan.search.objective, plan.epochs)
+    run_dirs: list[str] = []
+    try:
+        for seed_index in range(plan.search.seeds):
+            cfg = trial_config(plan.base, params, plan.search.first_seed + seed_index, threads)
+            run_dirs.append(str(run_dir(cfg)))
+            trial.set_user_attr("run_dirs", run_dirs)  # before training: failed and pruned trials have it too
+            train_seed(trial, plan, progress, params, cfg, seed_index)
+    except KeyboardInterrupt:
+        trial.set_user_attr("interrupted", True)
+        raise
+    except ConfigError as err:  # the run layer refused the run (memory, device, a damaged checkpoint): stop
+        trial.set_user_attr("refused", str(err))
+        trial.study.stop()
+        if refusals is not None:
+            refusals.append(str(err))
+        return float("nan")  # Optuna records the trial FAIL in one warning line
+    return progress.value()

@@ -1,0 +1,134 @@
+"""What every worker of a search receives (:class:`SearchPlan`) and how a trial's run configs
+are made from it.
+
+The training config is composed once, from the command's training overrides, into
+``plan.base``; a trial's run is ``base`` with a new :class:`ScheduleConfig` (so its checks
+run), ``algo.lambda_h`` when searched, the seed and the thread count replaced
+(:func:`trial_config`). Its directory and hash are those ``hersd-train`` gives for the
+equivalent overrides (:func:`param_overrides`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from hersd.compose import compose_train
+from hersd.config import ConfigError, ScheduleConfig, TrainConfig
+from hersd.resources import resolve_threads
+from hersd.runstore import check_writable, config_hash
+from sweeps.search.config import KIND_PARAMS, SearchConfig, enqueued_kind
+from sweeps.search.storage import SEARCH_FOLDER, resolve_storage
+
+# Training keys a search override may not set: the search chooses them, or (run_dir) every
+# run of every trial would share one directory.
+SEARCHED_KEYS = ("seed", "schedule", "run_dir")
+
+
+@dataclass
+class SearchPlan:
+    """Everything a worker needs (picklable: it crosses process and SLURM boundaries)."""
+
+    search: SearchConfig
+    base: TrainConfig  # the composed training config every run of every trial starts from
+    train_overrides: list[str]  # the command's training overrides (recorded with the study and each run)
+    study_name: str
+    storage: str  # the storage spec workers open (see sweeps.search.storage)
+    settings: dict[str, Any]  # what the objective depends on; stored with the study and checked on load
+    study_dir: str  # <results_dir>/search/<study>/: SLURM job logs
+
+    @property
+    def epochs(self) -> int:
+        """K, the epochs of every run."""
+        return self.base.epochs
+
+
+def refuse_searched_keys(train_overrides: list[str], search: SearchConfig) -> None:
+    """ConfigError if a training override sets what the search chooses (seed, schedule*, run_dir, lambda_h)."""
+    taken = SEARCHED_KEYS + (("algo.lambda_h",) if search.space.lambda_h is not None else ())
+    for override in train_overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        if key in taken or key.startswith("schedule."):
+            raise ConfigError(f"{override}: {key} is set by the search for each run (search.space, search.seeds, "
+                              f"search.first_seed); remove it")
+
+
+def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: str | None = None) -> TrainConfig:
+    """One run of a trial: ``base`` with the trial's schedule (and lambda_h), ``seed`` and ``threads``."""
+    kind = params["kind"]
+    schedule = ScheduleConfig(kind=kind, **{name: float(params[name]) for name in KIND_PARAMS[kind] if name in params})
+    algo = replace(base.algo, lambda_h=float(params["lambda_h"])) if "lambda_h" in params else base.algo
+    return replace(base, schedule=schedule, algo=algo, seed=seed, threads=threads or base.threads)
+
+
+def param_overrides(params: dict[str, Any]) -> list[str]:
+    """A trial's parameters as ``hersd-train`` overrides (floats written exactly)."""
+    kind = params["kind"]
+    overrides = [f"schedule={kind}"] + [f"schedule.{name}={float(params[name])!r}" for name in KIND_PARAMS[kind]]
+    return overrides + ([f"algo.lambda_h={float(params['lambda_h'])!r}"] if "lambda_h" in params else [])
+
+
+def run_threads(base: TrainConfig, concurrent_runs: int) -> str:
+    """A worker's runs' thread count (a str, as TrainConfig.threads): the user's N, else the cores / concurrent_runs."""
+    # Resolved in the worker's process: on a SLURM node the cores are the job's allocation.
+    return base.threads if base.threads != "auto" else str(resolve_threads("auto", concurrent_runs))
+
+
+def study_settings(search: SearchConfig, base: TrainConfig) -> dict[str, Any]:
+    """What the objective depends on -> {objective, metric, seeds, first_seed, epochs, task, algo, train_config}."""
+    # The training config is hashed with the searched fields neutralised, so a study's name
+    # stays the same while ranges change, and changes with any other training setting.
+    neutral = replace(base, seed=0, schedule=ScheduleConfig())
+    if search.space.lambda_h is not None:
+        neutral = replace(neutral, algo=replace(neutral.algo, lambda_h=1.0))
+    return {"objective": search.objective, "metric": search.metric, "seeds": search.seeds,
+            "first_seed": search.first_seed, "epochs": base.epochs, "task": base.task.name,
+            "algo": base.algo.name, "train_config": config_hash(neutral)}
+
+
+def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
+    """Build the runs of the enqueued sets and ranges' ends (first, last seed), so bad ones stop us now."""
+    last_seed = search.first_seed + search.seeds - 1
+    kinds = list(search.space.kinds)
+    probes = [(f"search.enqueue[{i}]", {**params, "kind": enqueued_kind(params, kinds)})
+              for i, params in enumerate(search.enqueue)]
+    for kind in search.space.kinds:
+        for end in ("low", "high"):
+            params = {"kind": kind, **{name: getattr(getattr(search.space, name), end) for name in KIND_PARAMS[kind]}}
+            if search.space.lambda_h is not None:
+                params["lambda_h"] = getattr(search.space.lambda_h, end)
+            probes.append((f"search.space ({kind}, {end} ends)", params))
+    for where, params in probes:
+        for seed in (search.first_seed, last_seed):
+            try:
+                trial_config(base, params, seed)
+            except ConfigError as err:
+                raise ConfigError(f"{where}: {err}") from None
+
+
+def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str = "default") -> SearchPlan:
+    """Compose the base training config once; check it and derive the study's name, storage and settings."""
+    # search_name (the conf/search file) is part of the default study name: another search file
+    # starts another study, while narrowed or widened ranges continue the same one.
+    refuse_searched_keys(train_overrides, search)
+    base = compose_train(train_overrides)
+    if not any(override.split("=", 1)[0].lstrip("+~") == "quiet" for override in train_overrides):
+        base = replace(base, quiet=True)  # workers' per-epoch lines would interleave
+    steps = search.seeds * base.epochs
+    if search.pruner.kind == "hyperband" and search.pruner.min_resource > steps:
+        raise ConfigError(f"search.pruner.min_resource ({search.pruner.min_resource}) exceeds the steps of a trial "
+                          f"(seeds x epochs = {steps})")
+    check_trial_configs(search, base)
+    storage = resolve_storage(search.storage) if search.storage else None
+    check_writable(Path(base.results_dir))  # the runs go here, the default storage below it
+    search_dir = Path(base.results_dir).resolve() / SEARCH_FOLDER
+    settings = study_settings(search, base)
+    digest = hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:8]
+    study_name = search.study_name or f"{base.task.name}-{base.algo.name}-{search_name}-{digest}"
+    storage = storage or f"sqlite:///{search_dir / study_name}.db"
+    return SearchPlan(search=search, base=base, train_overrides=list(train_overrides), study_name=study_name,
+                      storage=storage, settings=settings,
+                      study_dir=str(search_dir / study_name))

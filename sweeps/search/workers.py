@@ -1,0 +1,143 @@
+"""The workers that run Optuna's loop on the shared study: in this process (one worker),
+as spawned local processes (several), or as SLURM jobs through submitit.
+
+A worker's runs use ``threads=N`` if the user gave it, else the cores shared by the workers
+that run at once on them: ``len(shares)`` local workers on this machine, one per SLURM job
+(whose allocation is the worker's).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+import threading
+import time
+from dataclasses import asdict
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import optuna
+
+from hersd.compose import CONFIG_MODULE
+from hersd.config import ConfigError
+from sweeps.search.config import SlurmConfig
+from sweeps.search.objective import objective
+from sweeps.search.plan import SearchPlan, run_threads
+from sweeps.search.storage import open_storage
+from sweeps.search.study import FINISHED_STATES, make_pruner, make_sampler
+
+SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
+SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
+
+
+def _exit_when_orphaned(parent_pid: int) -> None:
+    """A local worker ends when the search process that started it is gone (e.g. kill -9)."""
+    while os.getppid() == parent_pid:
+        time.sleep(2.0)
+    os._exit(1)
+
+
+def run_worker(plan: SearchPlan, worker_index: int, n_trials: int, trials_before: int, concurrent_runs: int,
+               parent_pid: int | None = None) -> None:
+    """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores."""
+    if parent_pid is not None:
+        threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
+    threads, refusals = run_threads(plan.base, concurrent_runs), []
+    study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
+                              sampler=make_sampler(plan.search.sampler, worker_index, trials_before),
+                              pruner=make_pruner(plan))
+    stop_when_done = optuna.study.MaxTrialsCallback(plan.search.n_trials, states=FINISHED_STATES)
+    try:
+        study.optimize(partial(objective, plan=plan, threads=threads, refusals=refusals), n_trials=n_trials,
+                       catch=(Exception,), callbacks=[stop_when_done])
+    except KeyboardInterrupt:
+        if parent_pid is None:  # in the search's own process (or a SLURM job): let it report it
+            raise
+        sys.exit(130)  # a worker process: the trial is recorded as interrupted; no traceback
+    if refusals and parent_pid is None:
+        raise ConfigError(refusals[0])
+    if refusals:
+        print(f"hersd-search: error: {refusals[0]}", file=sys.stderr, flush=True)
+        sys.exit(2)
+
+
+def split_trials(n_trials: int, n_workers: int) -> list[int]:
+    """``n_trials`` shared as evenly as possible among at most ``n_workers`` workers -> trials per worker."""
+    n_workers = max(1, min(n_workers, n_trials))
+    return [n_trials // n_workers + (i < n_trials % n_workers) for i in range(n_workers)]
+
+
+def run_local(plan: SearchPlan, shares: list[int], trials_before: int) -> list[int]:
+    """Run the workers here: in this process if one, else as spawned processes -> their exit codes."""
+    if len(shares) == 1:
+        run_worker(plan, 0, shares[0], trials_before, concurrent_runs=1)
+        return [0]
+    context = multiprocessing.get_context("spawn")  # no fork: torch, MuJoCo and open DB connections
+    workers = [context.Process(target=run_worker, name=f"hersd-search-{i}",
+                               args=(plan, i, share, trials_before, len(shares), os.getpid()))
+               for i, share in enumerate(shares)]
+    for worker in workers:
+        worker.start()
+    try:
+        for worker in workers:
+            worker.join()
+    except KeyboardInterrupt:  # the workers got the same SIGINT: let them record it
+        for worker in workers:
+            worker.join()
+        raise
+    return [worker.exitcode for worker in workers]
+
+
+def slurm_settings(slurm: SlurmConfig) -> dict[str, Any]:
+    """{partition, timeout_min, cpus_per_task, mem_gb} per worker job: search.slurm over hersd-sweep's preset."""
+    # The preset is read from the installed hersd.conf package (works from a wheel); without it, SLURM_FALLBACK.
+    from importlib.resources import files
+
+    from omegaconf import OmegaConf
+
+    settings = dict(SLURM_FALLBACK)
+    preset = files(CONFIG_MODULE).joinpath(*SLURM_PRESET)
+    if preset.is_file():
+        loaded = OmegaConf.to_container(OmegaConf.create(preset.read_text()))
+        settings.update({key: loaded[key] for key in SLURM_FALLBACK if key in loaded})
+    settings.update({key: value for key, value in asdict(slurm).items() if value is not None})
+    return settings
+
+
+def check_slurm(slurm: SlurmConfig) -> None:
+    """ConfigError unless SLURM answers here (``sinfo``) and has the partition(s) asked for."""
+    import subprocess
+
+    try:
+        done = subprocess.run(["sinfo", "--noheader", "--format=%P"], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        raise ConfigError(f"search.launcher=slurm: cannot run sinfo here ({err}); submit from a SLURM login "
+                          f"node") from None
+    if done.returncode != 0:
+        reason = (done.stderr.strip().splitlines() or [f"exit code {done.returncode}"])[-1]
+        raise ConfigError(f"search.launcher=slurm: SLURM does not answer here ({reason})")
+    known = [name.rstrip("*") for name in done.stdout.split()]
+    wanted = slurm_settings(slurm)["partition"]
+    missing = [name for name in (wanted or "").split(",") if name and name not in known]
+    if missing:
+        raise ConfigError(f"search.slurm.partition={wanted}: no partition {', '.join(missing)} here; "
+                          f"choose among: {', '.join(known)}")
+
+
+def submit_slurm(plan: SearchPlan, shares: list[int], trials_before: int) -> list[str]:
+    """Submit one SLURM job per worker (a submitit job array) -> job ids; ConfigError if SLURM refuses."""
+    import submitit
+
+    settings = slurm_settings(plan.search.slurm)
+    try:
+        executor = submitit.AutoExecutor(folder=Path(plan.study_dir) / "slurm" / "%j", cluster="slurm")
+        executor.update_parameters(name=f"hersd-search-{plan.study_name}", timeout_min=settings["timeout_min"],
+                                   cpus_per_task=settings["cpus_per_task"], mem_gb=settings["mem_gb"],
+                                   **({"slurm_partition": settings["partition"]} if settings["partition"] else {}))
+        n = len(shares)
+        jobs = executor.map_array(run_worker, [plan] * n, list(range(n)), shares, [trials_before] * n, [1] * n)
+    except Exception as err:  # noqa: BLE001 - no SLURM here, or sbatch refused the jobs
+        raise ConfigError(f"search.launcher=slurm: {' '.join(str(err).split())[:300]}") from None
+    return [job.job_id for job in jobs]
