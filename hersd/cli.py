@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hersd import schedules
 from hersd.compose import compose_train, explain_config_error, group_options
 from hersd.config import ConfigError, TrainConfig
 from hersd.runstore import RunLockedError, check_writable, run_dir
@@ -53,6 +54,12 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
     return lines
 
 
+def schedule_formulas() -> list[str]:
+    """The relabel rate of each schedule.kind, as listed in :mod:`hersd.schedules`' docstring."""
+    doc = schedules.__doc__
+    return [f"  {line}" for line in doc[doc.index("- constant:"):].split("\n\n")[0].splitlines()]
+
+
 def usage() -> str:
     groups = [f"  {group}={'|'.join(group_options(group))}" for group in GROUPS]
     return "\n".join([
@@ -62,7 +69,9 @@ def usage() -> str:
         "appendix settings. See docs/ARCHITECTURE.md.", "",
         "config groups (conf/<group>/*.yaml):", *groups, "",
         "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
-        *schema_lines(TrainConfig),
+        *schema_lines(TrainConfig), "",
+        "schedules (eps(k): the relabel rate of epoch k = 1..K; fields are schedule.<name>):",
+        *schedule_formulas(),
     ])
 
 

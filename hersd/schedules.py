@@ -2,13 +2,14 @@
 
 eps is the probability that a sampled transition's goal is replaced by a hindsight goal.
 
-- ``constant``:     eps(k) = eps                                (HER: 0.8)
-- ``linear``:       eps(k) = 1 - beta1 * (k / K)                 (eq. 9 with beta2 = 0)
-- ``exponential``:  eps(k) = 1 - beta1 * (k / K) ** exp(beta2)    (eq. 9)
-- ``success``:      eps(k) = clip(1 - beta1 * s(k), eps_min, 1), s(k) = the mean train success
-                    of the ``window`` epochs before k (s(1) = 0): the rate follows the agent's
-                    progress instead of the epoch count (beyond the paper; its conclusion
-                    suggests the optimal decay need not be a function of the epoch)
+- constant:     eps(k) = eps                                  (HER: 0.8)
+- linear:       eps(k) = 1 - beta1 * (k / K)                  (eq. 9 with beta2 = 0)
+- exponential:  eps(k) = 1 - beta1 * (k / K) ** exp(beta2)    (eq. 9)
+- success:      eps(k) = clip(1 - beta1 * s(k), eps_min, 1), s(k) = the mean train success
+                of the last `window` epochs before k (fewer while k <= window; s(1) = 0): the
+                rate follows the agent's progress instead of the epoch count (beyond the
+                paper; its conclusion suggests the optimal decay need not be a function of
+                the epoch)
 
 mu_eps is the mean rate over the K epochs: exactly (eq. 10) or by the continuous
 approximation 1 - beta1 / (1 + exp(beta2)) (eq. 11); a success schedule's mean rate is known only
