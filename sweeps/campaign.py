@@ -1,0 +1,352 @@
+"""``hersd-campaign``: a campaign of sweeps (``conf/campaign/<name>.yaml``) as one resumable command.
+
+A campaign is a list of stages, each a list of ``hersd-sweep`` command lines; run one after
+another they make every run of the campaign. Subcommands (``--results-dir`` defaults to
+``~/hersd-campaign``, outside the work tree):
+
+- ``start``  runs the stages in a detached background process (``run``), output to
+  ``<DIR>/campaign.log``, and returns at once; a campaign already running for DIR is left alone;
+- ``run``    the same in the foreground (what ``start`` runs);
+- ``status`` one line per planned run: complete, ``epoch N of K`` or new, and what is training;
+- ``land``   copies each planned run's ``run.mcap`` into the repository's results folder.
+
+Planned runs are found the way hersd-sweep finds them: each sweep's grid is expanded by
+Hydra's basic sweeper and every job composed into its TrainConfig, whose
+:func:`hersd.runstore.run_dir` is the run's directory. The run store skips complete runs and
+resumes interrupted ones, so starting a campaign again finishes what is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+from hersd.compose import CONFIG_MODULE, explain_config_error, group_options
+from hersd.config import TrainConfig
+from hersd.runlog import LOG_NAME, RunLogError, read_records
+from hersd.runstore import LOCK_NAME, run_dir
+from sweeps.hydra_private import basic_sweeper_class, grid_overrides
+from sweeps.launch import job_train_config, register_schemas
+
+GROUP = "campaign"  # conf/campaign/<name>.yaml
+DEFAULT_CAMPAIGN = "push_paper"
+DEFAULT_RESULTS_DIR = Path.home() / "hersd-campaign"
+DEFAULT_INTO = Path("results")
+PID_NAME = "campaign.pid"
+CAMPAIGN_LOG = "campaign.log"
+RUNNER = [sys.executable, "-m", "sweeps.campaign", "run"]  # what ``start`` detaches; its command line names this module
+SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]  # hersd-sweep in this interpreter
+
+
+class CampaignError(ValueError):
+    """Bad input: an unknown campaign, a folder that cannot be created or written."""
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    sweeps: list[list[str]]  # each a hersd-sweep command line (without results_dir)
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One run of the campaign: the first stage that names it, its directory below the results dir."""
+
+    stage: int  # 1-based
+    relative: Path  # e.g. push/her/constant-0.8/seed1-0c03aeaf
+    seed: int
+    epochs: int
+
+    @property
+    def arm(self) -> str:
+        return self.relative.parent.as_posix()
+
+
+def load_campaign(name: str) -> list[Stage]:
+    """The stages of ``conf/campaign/<name>.yaml``."""
+    from importlib.resources import files
+
+    from omegaconf import OmegaConf
+
+    if name not in group_options(GROUP):
+        raise CampaignError(f"unknown campaign {name!r}; choose one of: {', '.join(group_options(GROUP))}")
+    conf = OmegaConf.create(files(CONFIG_MODULE).joinpath(GROUP, f"{name}.yaml").read_text())
+    return [Stage(str(stage.name), [shlex.split(sweep) for sweep in stage.sweeps]) for stage in conf.stages]
+
+
+# --------------------------------------------------------------------------- the plan
+def sweep_jobs(overrides: list[str], compose: Callable) -> list[list[str]]:
+    """One hersd-sweep command line -> each run's overrides, in the order hersd-sweep runs them:
+    the grid's ``hydra.sweeper.params`` then the command line, expanded by Hydra's basic sweeper."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
+
+    parser = OverridesParser.create()
+    fixed = [o.input_line for o in parser.parse_overrides(overrides) if not o.is_sweep_override()]
+    params = compose("sweep", fixed, return_hydra_config=True).hydra.sweeper.params
+    sweeper = basic_sweeper_class()(max_batch_size=None, params=OmegaConf.to_container(params, resolve=True))
+    batches = sweeper.split_arguments(parser.parse_overrides(grid_overrides(sweeper) + overrides), None)
+    return [job for batch in batches for job in batch]
+
+
+def job_config(job: list[str], compose: Callable, composed: dict[tuple[str, ...], TrainConfig]) -> TrainConfig:
+    """One job's TrainConfig. Jobs that differ only in ``seed`` and ``seeds`` (which set no other
+    field) are composed once, in ``composed``, and the seed set afterwards: composing is slow."""
+    key = tuple(override for override in job if override.split("=", 1)[0] not in ("seed", "seeds"))
+    if key not in composed:
+        composed[key] = job_train_config(compose("sweep", list(key)))
+    seeds = [override.removeprefix("seed=") for override in job if override.startswith("seed=")]
+    return replace(composed[key], seed=int(seeds[0])) if seeds else composed[key]
+
+
+def plan_runs(stages: list[Stage], results_dir: Path) -> list[PlannedRun]:
+    """Every run of the stages, in stage order, each once (under the first stage that names it)."""
+    from hydra import compose, initialize_config_module
+
+    register_schemas()
+    planned: dict[Path, PlannedRun] = {}
+    composed: dict[tuple[str, ...], TrainConfig] = {}
+    try:
+        with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3", job_name="hersd-campaign"):
+            for number, stage in enumerate(stages, 1):
+                for sweep in stage.sweeps:
+                    for job in sweep_jobs([*sweep, f"results_dir={results_dir}"], compose):
+                        cfg = job_config(job, compose, composed)
+                        relative = run_dir(cfg).relative_to(results_dir)
+                        planned.setdefault(relative, PlannedRun(number, relative, cfg.seed, cfg.epochs))
+    except Exception as err:  # noqa: BLE001 - Hydra's composition errors become one line
+        raise CampaignError(f"the campaign's sweeps do not compose: {explain_config_error(err)}") from None
+    return list(planned.values())
+
+
+# --------------------------------------------------------------------------- what is running
+def campaign_pid(results_dir: Path) -> int | None:
+    """The pid of the campaign process running for ``results_dir`` (its pid file names a live
+    process whose command line is the runner's), else None."""
+    pid = _pid_file(results_dir)
+    if pid is None:
+        return None
+    try:
+        os.kill(pid, 0)
+    except OSError:  # no such process, or another user's: not a runner we started
+        return None
+    try:
+        command = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+    except OSError:  # no /proc: trust the live pid
+        return pid
+    # not a reused pid, nor an exited (zombie) process: the runner started by start, or hersd-campaign run
+    return pid if "sweeps.campaign" in command or "hersd-campaign" in command else None
+
+
+def _pid_file(results_dir: Path) -> int | None:
+    try:
+        return int((results_dir / PID_NAME).read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def runs_in_training(results_dir: Path) -> dict[Path, int]:
+    """Run directories below ``results_dir`` whose lock a process holds -> that process's pid
+    (from Linux's /proc/locks, read only; empty where there is none)."""
+    try:
+        lines = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return {}
+    holders = {}
+    for line in lines:  # "1: FLOCK  ADVISORY  WRITE 2159 fe:00:1474567 0 EOF" (major:minor:inode)
+        fields = line.split()
+        if len(fields) > 5 and fields[1] == "FLOCK":
+            holders[fields[5]] = int(fields[4])
+    found = {}
+    for lock in Path(results_dir).rglob(LOCK_NAME):
+        try:
+            stat = lock.stat()
+        except OSError:  # removed meanwhile
+            continue
+        key = f"{os.major(stat.st_dev):02x}:{os.minor(stat.st_dev):02x}:{stat.st_ino}"
+        if key in holders:
+            found[lock.parent] = holders[key]
+    return found
+
+
+def progress(log: Path, epochs: int) -> str:
+    """``complete``, ``epoch N of K`` (a log being written or interrupted), ``new`` (no log yet)
+    or ``unreadable (...)``."""
+    if not log.exists():
+        return "new"
+    try:
+        records = read_records(log)
+    except RunLogError as err:
+        return f"unreadable ({str(err).removeprefix(f'{log}: ')})"
+    return "complete" if records.complete else f"epoch {len(records.records)} of {epochs}"
+
+
+# --------------------------------------------------------------------------- subcommands
+def status(campaign: str, results_dir: Path) -> int:
+    """Print the campaign process's state and one line per planned run."""
+    plan = plan_runs(load_campaign(campaign), results_dir)
+    pid = campaign_pid(results_dir)
+    busy = runs_in_training(results_dir)
+    print(f"campaign {campaign} in {results_dir}: " + (f"running (pid {pid}, log {results_dir / CAMPAIGN_LOG})"
+                                                        if pid else "not running (hersd-campaign start)"))
+    print(f"{'stage':<6} {'arm':<32} {'seed':<5} state")
+    states = []
+    for run in plan:
+        state = progress(results_dir / run.relative / LOG_NAME, run.epochs)
+        holder = busy.get(results_dir / run.relative)
+        states.append(state)
+        print(f"{run.stage:<6} {run.arm:<32} {run.seed:<5} {state}" + (f", training (pid {holder})" if holder else ""))
+    done = states.count("complete")
+    started = sum(state.startswith("epoch ") for state in states)
+    print(f"{len(plan)} planned runs: {done} complete, {started} in progress, {states.count('new')} new"
+          + (f"; {len(busy)} training now" if busy else ""))
+    return 0
+
+
+def land(campaign: str, results_dir: Path, into: Path) -> int:
+    """Copy every planned run's log (complete or not) to the same relative path below ``into``."""
+    plan = plan_runs(load_campaign(campaign), results_dir)
+    changed = []
+    for run in plan:
+        source = results_dir / run.relative / LOG_NAME
+        if not source.exists():
+            continue
+        target = into / run.relative / LOG_NAME
+        copied = copy_atomically(source, target)
+        state = progress(target, run.epochs)
+        print(f"{'landed' if copied else 'unchanged':<9} {target}  {state}")
+        if copied:
+            changed.append(target)
+    print(f"{len(changed)} log(s) landed in {into}" + ("; commit them with:\n  git add -- "
+                                                         + " ".join(shlex.quote(str(p)) for p in changed)
+                                                         if changed else ""))
+    return 0
+
+
+def copy_atomically(source: Path, target: Path) -> bool:
+    """Copy ``source`` to ``target`` through a temporary name and a rename, so ``target`` is
+    never partly written; False (nothing written) when ``target`` already holds the same bytes."""
+    data = source.read_bytes()  # one snapshot of a log that may be growing
+    if target.exists() and target.read_bytes() == data:
+        return False
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        temporary.write_bytes(data)
+        os.replace(temporary, target)
+    except OSError as err:
+        raise CampaignError(f"cannot write {target} ({err.strerror})") from None
+    return True
+
+
+def start(campaign: str, results_dir: Path) -> int:
+    """Start the campaign in a detached process unless one runs for ``results_dir`` already."""
+    load_campaign(campaign)  # an unknown campaign is an error here, not in the log
+    pid = campaign_pid(results_dir)
+    log = results_dir / CAMPAIGN_LOG
+    if pid:
+        print(f"campaign already running for {results_dir} (pid {pid}); log {log}")
+        return 0
+    others = sorted(set(runs_in_training(results_dir).values()))
+    if others:
+        print(f"not started: runs under {results_dir} are being trained by process(es) "
+              f"{', '.join(map(str, others))} (a sweep started by hand?); start the campaign when they end")
+        return 1
+    make_folder(results_dir)
+    with open(log, "a") as output:
+        process = subprocess.Popen([*RUNNER, "--campaign", campaign, "--results-dir", str(results_dir)],
+                                   stdin=subprocess.DEVNULL, stdout=output, stderr=subprocess.STDOUT,
+                                   start_new_session=True)
+    (results_dir / PID_NAME).write_text(f"{process.pid}\n")
+    print(f"campaign {campaign} started in the background: pid {process.pid}, log {log} "
+          f"(stop it with: kill -- -{process.pid})")
+    return 0
+
+
+def run(campaign: str, results_dir: Path) -> int:
+    """Run the stages' sweeps one after another in this process; exit 1 if any sweep failed."""
+    stages = load_campaign(campaign)
+    pid = campaign_pid(results_dir)
+    if pid and pid != os.getpid():
+        print(f"campaign already running for {results_dir} (pid {pid})")
+        return 0
+    make_folder(results_dir)
+    (results_dir / PID_NAME).write_text(f"{os.getpid()}\n")
+    failed = []
+    try:
+        for number, stage in enumerate(stages, 1):
+            for sweep in stage.sweeps:
+                command = [*sweep, f"results_dir={results_dir}"]
+                _say(f"stage {number}/{len(stages)} ({stage.name}): hersd-sweep {shlex.join(command)}")
+                if subprocess.run([*SWEEP, *command]).returncode:
+                    failed.append(f"stage {number}: hersd-sweep {shlex.join(sweep)}")
+    finally:
+        if _pid_file(results_dir) == os.getpid():
+            (results_dir / PID_NAME).unlink()
+    _say(f"campaign {campaign} finished" + (f"; failed: {'; '.join(failed)} (hersd-campaign start retries them)"
+                                            if failed else ": every stage done"))
+    return 1 if failed else 0
+
+
+def _say(line: str) -> None:
+    print(f"[{time.strftime('%Y-%m-%d %H:%M:%S')}] hersd-campaign: {line}", flush=True)
+
+
+def make_folder(folder: Path) -> None:
+    """Create ``folder`` (CampaignError when it cannot be created or written)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise CampaignError(f"cannot create {folder} ({err.strerror}); pass --results-dir <a writable folder>") from None
+    if not os.access(folder, os.W_OK):
+        raise CampaignError(f"cannot write to {folder}; pass --results-dir <a writable folder>")
+
+
+# --------------------------------------------------------------------------- command line
+class _OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line on stderr, exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def parse(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = _OneLineParser(prog="hersd-campaign", description="A campaign of sweeps as one resumable command.")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser,
+                                     metavar="{start,status,land,run}")
+    for name, text in (("start", "start or resume the campaign in the background"),
+                       ("status", "one line per planned run: complete, epoch N of K, or new"),
+                       ("land", "copy every planned run's run.mcap into the results folder"),
+                       ("run", "run the campaign in the foreground (what start runs)")):
+        command = commands.add_parser(name, help=text, description=text)
+        command.add_argument("--campaign", default=DEFAULT_CAMPAIGN, help=f"conf/campaign/<name>.yaml "
+                             f"(default {DEFAULT_CAMPAIGN})")
+        command.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR,
+                             help=f"where the runs are written (default {DEFAULT_RESULTS_DIR})")
+        if name == "land":
+            command.add_argument("--into", type=Path, default=DEFAULT_INTO,
+                                 help="the folder mirroring the results dir (default: results, the repository's)")
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse(argv)
+    results_dir = args.results_dir.expanduser().absolute()
+    try:
+        if args.command == "land":
+            return land(args.campaign, results_dir, args.into)
+        return {"start": start, "status": status, "run": run}[args.command](args.campaign, results_dir)
+    except CampaignError as err:
+        print(f"hersd-campaign: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

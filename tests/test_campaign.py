@@ -1,0 +1,178 @@
+"""hersd-campaign: the stage plan, status and land on synthetic logs, start's single instance,
+the runner's stage order, bad input. No training: the sweeps are planned or replaced by stand-ins."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+
+from analysis.synthetic import write_run
+from hersd.config import TrainConfig
+from hersd.runlog import read_records
+from hersd.runstore import run_lock
+from sweeps import campaign
+
+SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
+
+
+@pytest.fixture(scope="module")
+def plan(tmp_path_factory) -> list[campaign.PlannedRun]:
+    """The push_paper campaign's runs (their paths below a results dir do not depend on it)."""
+    return campaign.plan_runs(campaign.load_campaign("push_paper"), tmp_path_factory.mktemp("campaign"))
+
+
+def write_log(directory: Path, epochs_done: int, complete: bool) -> Path:
+    """A synthetic 200-epoch run's log holding ``epochs_done`` epochs."""
+    with mock.patch("os.fsync"):  # the writer's crash safety is not under test
+        return write_run(directory, TrainConfig(epochs=200), np.linspace(0, 1, epochs_done), complete=complete)
+
+
+def test_stages_add_seeds_evenly_and_each_run_is_planned_once(plan):
+    runs = plan
+    assert len({run.relative for run in runs}) == len(runs) == 20
+    by_stage = [[(run.arm.removeprefix("push/her/"), run.seed) for run in runs if run.stage == stage]
+                for stage in (1, 2, 3, 4)]
+    assert by_stage[0] == [(arm, seed) for seed in range(3) for arm in ("constant-0.8", "linear-b1_0.25")]
+    assert by_stage[1] == [("constant-0.874375", seed) for seed in range(3)]
+    assert by_stage[2] == [("success-b1_0.25-w10", seed) for seed in range(3)]
+    assert by_stage[3] == [(arm, seed) for seed in (3, 4) for arm in ("constant-0.8", "linear-b1_0.25",
+                                                                      "constant-0.874375")] + \
+        [("success-b1_0.25-w10", seed) for seed in (3, 4)]  # seeds 0-2 of stage 4's grids: planned before
+    assert {run.epochs for run in runs} == {200}
+
+
+def test_the_plan_is_hersd_sweeps_own(plan, tmp_path):
+    """Each stage's runs are the directories `hersd-sweep ... --dry-run` lists, in its order."""
+    results, runs = tmp_path / "results", plan
+    listed: list[Path] = []
+    for stage in campaign.load_campaign("push_paper"):
+        for sweep in stage.sweeps:
+            out = subprocess.run([*SWEEP, *sweep, f"results_dir={results}", "--dry-run"], capture_output=True,
+                                 text=True, check=True, timeout=300).stdout
+            listed += [Path(line.split()[1]) for line in out.splitlines() if line.startswith("  new ")]
+    assert list(dict.fromkeys(listed)) == [results / run.relative for run in runs]
+
+
+def test_status_shows_complete_in_progress_training_and_new_runs(plan, tmp_path, capsys):
+    results, runs = tmp_path / "results", plan
+    write_log(results / runs[0].relative, 200, complete=True)
+    write_log(results / runs[1].relative, 3, complete=False)
+    write_log(results / runs[2].relative, 7, complete=False)
+    with run_lock(results / runs[2].relative):  # as a training process holds it
+        assert campaign.main(["status", "--results-dir", str(results)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"campaign push_paper in {results}: not running (hersd-campaign start)"
+    rows = [line.split(maxsplit=3) for line in lines[2:-1]]
+    assert [(int(stage), arm, int(seed)) for stage, arm, seed, _ in rows] == [(r.stage, r.arm, r.seed) for r in runs]
+    assert [state for *_, state in rows[:4]] == ["complete", "epoch 3 of 200",
+                                                 f"epoch 7 of 200, training (pid {os.getpid()})", "new"]
+    assert lines[-1] == "20 planned runs: 1 complete, 2 in progress, 17 new; 1 training now"
+
+
+def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path, capsys):
+    results, runs = tmp_path / "results", plan
+    complete = write_log(results / runs[0].relative, 200, complete=True)
+    running = write_log(results / runs[1].relative, 3, complete=False)
+    (running.parent / "checkpoint.pt").write_bytes(b"not landed")
+    into = tmp_path / "repo" / "results"
+    assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
+    out = capsys.readouterr().out
+    assert f"landed    {into / runs[0].relative / 'run.mcap'}  complete" in out
+    assert f"landed    {into / runs[1].relative / 'run.mcap'}  epoch 3 of 200" in out
+    assert "git add -- " in out
+    landed = sorted(p.relative_to(into) for p in into.rglob("*") if p.is_file())
+    assert landed == sorted([runs[0].relative / "run.mcap", runs[1].relative / "run.mcap"])  # no checkpoint, no temp
+    assert (into / runs[0].relative / "run.mcap").read_bytes() == complete.read_bytes()
+
+    write_log(results / runs[1].relative, 5, complete=False)  # the run went on
+    assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
+    out = capsys.readouterr().out
+    assert f"unchanged {into / runs[0].relative / 'run.mcap'}  complete" in out
+    assert f"landed    {into / runs[1].relative / 'run.mcap'}  epoch 5 of 200" in out
+    assert len(read_records(into / runs[1].relative / "run.mcap").records) == 5
+
+
+def test_start_detaches_one_campaign_and_refuses_a_second(tmp_path, monkeypatch, capsys):
+    # The runner replaced by a sleeper whose command line names the campaign module, as the runner's does.
+    monkeypatch.setattr(campaign, "RUNNER", [sys.executable, "-c", "import time; time.sleep(120)", "sweeps.campaign"])
+    started = []
+    real_popen = subprocess.Popen
+    monkeypatch.setattr(subprocess, "Popen", lambda *a, **k: started.append(real_popen(*a, **k)) or started[-1])
+    results = tmp_path / "results"
+    try:
+        assert campaign.main(["start", "--results-dir", str(results)]) == 0
+        pid = int((results / campaign.PID_NAME).read_text())
+        assert f"started in the background: pid {pid}, log {results / 'campaign.log'}" in capsys.readouterr().out
+        assert started[0].pid == pid and os.getsid(pid) == pid  # detached: a session of its own
+        assert campaign.main(["start", "--results-dir", str(results)]) == 0
+        assert f"campaign already running for {results} (pid {pid})" in capsys.readouterr().out
+        assert len(started) == 1
+    finally:
+        for process in started:
+            process.kill()
+            process.wait()
+    assert campaign.campaign_pid(results) is None  # a pid file naming an ended process does not count
+
+
+def test_a_started_campaign_of_complete_runs_runs_every_stage_and_ends(plan, tmp_path, monkeypatch, capsys):
+    """The real detached runner and hersd-sweep, on a results dir whose runs are all complete (so
+    nothing trains): every stage's sweep skips them, the log says so, the pid file goes."""
+    results = tmp_path / "results"
+    for run in plan:
+        write_log(results / run.relative, 200, complete=True)
+    started = []
+    real_popen = subprocess.Popen
+    monkeypatch.setattr(subprocess, "Popen", lambda *a, **k: started.append(real_popen(*a, **k)) or started[-1])
+    assert campaign.main(["start", "--results-dir", str(results)]) == 0
+    assert started[0].wait(timeout=300) == 0
+    log = (results / "campaign.log").read_text()
+    assert log.count("complete (skipped)") == 5 and "campaign push_paper finished: every stage done" in log
+    assert not (results / campaign.PID_NAME).exists()
+    capsys.readouterr()
+    assert campaign.main(["status", "--results-dir", str(results)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == "20 planned runs: 20 complete, 0 in progress, 0 new"
+
+
+def test_start_leaves_runs_being_trained_by_another_process_alone(plan, tmp_path, capsys):
+    results, runs = tmp_path / "results", plan
+    (results / runs[5].relative).mkdir(parents=True, exist_ok=True)
+    with run_lock(results / runs[5].relative):
+        assert campaign.main(["start", "--results-dir", str(results)]) == 1
+    assert f"being trained by process(es) {os.getpid()}" in capsys.readouterr().out
+    assert not (results / campaign.PID_NAME).exists()
+
+
+def test_the_runner_runs_every_sweep_in_stage_order(tmp_path, monkeypatch, capfd):
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", "import sys; print('sweep', *sys.argv[1:])"])
+    results = tmp_path / "results"
+    assert campaign.main(["run", "--results-dir", str(results)]) == 0
+    out = capfd.readouterr().out
+    sweeps = [line.removeprefix("sweep ") for line in out.splitlines() if line.startswith("sweep ")]
+    expected = [" ".join([*sweep, f"results_dir={results}"]) for stage in campaign.load_campaign("push_paper")
+                for sweep in stage.sweeps]
+    assert sweeps == expected and len(sweeps) == 5
+    assert "stage 1/4 (HER and linear 0.25, seeds 0-2): hersd-sweep +grid=push_paper seeds=3" in out
+    assert "campaign push_paper finished: every stage done" in out
+    assert not (results / campaign.PID_NAME).exists()
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["stop"], "invalid choice: 'stop'"),
+    (["status", "--campaign", "nope"], "unknown campaign 'nope'; choose one of: push_paper"),
+    (["start", "--results-dir", "{blocker}/sub"], "cannot create"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, arguments, message):
+    (tmp_path / "blocker").write_text("a file, not a folder")
+    arguments = [a.replace("{blocker}", str(tmp_path / "blocker")) for a in arguments]
+    try:
+        code = campaign.main(arguments)
+    except SystemExit as exited:
+        code = exited.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and message in err
