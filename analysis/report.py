@@ -31,7 +31,7 @@ import pandas as pd
 
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK
-from analysis.studies import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
+from hersd.study import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
 from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
 from hersd.tasks import task_title

@@ -9,11 +9,11 @@
 - ``<study>_best_trials.csv`` / ``.md``: the best complete trials, with mu_eps exact over
   the study's epochs (eq. 10) and by eq. 11, and their run directories.
 
+What a study holds (trial parameters, user attributes) is defined by :mod:`hersd.study`.
 :func:`study_figures` draws these for every study in a storage (or one), opened read-only
-by :func:`analysis.studies.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR [--study
-NAME]`` does the same from the command line (``hersd-report`` draws them for every study it
-finds). Needs optuna, pandas
-and matplotlib, not torch or MuJoCo.
+by :func:`hersd.study.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR
+[--study NAME]`` does the same from the command line (``hersd-report`` draws them for every
+study it finds). Needs optuna, pandas and matplotlib, not torch or MuJoCo.
 """
 
 from __future__ import annotations
@@ -36,50 +36,38 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
-from analysis.studies import StudyStorageError, open_study_storage  # noqa: E402
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.schedules import MU_EPS_BAND, effective_beta2, mean_rate_approx, schedule_mean_rates  # noqa: E402
+from hersd.schedules import MU_EPS_BAND, effective_beta2, mean_rate_approx  # noqa: E402
+from hersd.study import (KIND_PARAMS, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
+                         StudyStorageError, mean_rates, open_study_storage, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
-# The parameters a trial of each schedule kind is searched with (sweeps/search/config.py's space).
-SCHEDULE_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
-PLANE_KINDS = tuple(kind for kind, names in SCHEDULE_PARAMS.items() if "beta1" in names)  # eq. 9 decays
-COLUMNS = ["trial", "state", "value", "kind", "beta1", "beta2", "eps", "lambda_h", "mu_eps", "mu_eps_approx",
-           "in_band", "last_step", "retry_of", "duration_s", "run_dirs"]
-
-
-def _schedule_kind(params: dict) -> str | None:
-    """The trial's schedule kind: its ``kind`` parameter, else implied by which betas it has."""
-    if "kind" in params:
-        return params["kind"]
-    if "eps" in params:
-        return "constant"
-    if "beta2" in params:
-        return "exponential"
-    return "linear" if "beta1" in params else None
+PLANE_KINDS = tuple(kind for kind, names in KIND_PARAMS.items() if "beta1" in names)  # eq. 9 decays
+COLUMNS = ["trial", "state", "value", *PARAM_NAMES, "mu_eps", "mu_eps_approx", "in_band", "last_step", "retry_of",
+           "duration_s", "run_dirs"]
 
 
 def trials_frame(study: optuna.Study) -> pd.DataFrame:
     """One row per trial (waiting trials left out); mu_eps exact over the study's epochs."""
-    epochs = study.user_attrs.get("settings", {}).get("epochs")
+    settings = StudySettings.of(study.user_attrs)
+    epochs = settings.epochs if settings else None
     rows = []
     for trial in study.get_trials(deepcopy=False):
         if trial.state == TrialState.WAITING:
             continue
-        params = dict(trial.params)
-        kind = _schedule_kind(params)
+        params = trial_params(trial.params)
+        kind = params["kind"]
         decays = kind in PLANE_KINDS
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
                "beta1": params.get("beta1"),
                "beta2": effective_beta2(kind, params.get("beta2", 0.0)) if decays else None,
                "eps": params.get("eps"), "lambda_h": params.get("lambda_h"), "last_step": trial.last_step,
-               "retry_of": trial.user_attrs.get("retry_of"),
+               "retry_of": trial.user_attrs.get(RETRY_OF_ATTR),
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
-               "run_dirs": ";".join(trial.user_attrs.get("run_dirs", []))}
-        if kind in SCHEDULE_PARAMS and set(SCHEDULE_PARAMS[kind]) <= set(params):
-            exact, approx = schedule_mean_rates(kind, params.get("eps"), params.get("beta1"), params.get("beta2"),
-                                                epochs or 1)
+               "run_dirs": ";".join(trial.user_attrs.get(RUN_DIRS_ATTR, []))}
+        if kind in KIND_PARAMS and set(KIND_PARAMS[kind]) <= set(params):
+            exact, approx = mean_rates(params, epochs or 1)
             row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
                        in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])
         rows.append(row)
@@ -189,9 +177,8 @@ def read_study(storage: optuna.storages.BaseStorage, name: str, top: int = 10) -
     """Everything drawn of study ``name``, read once from ``storage`` (an opened, read-only storage)."""
     study = optuna.load_study(study_name=name, storage=storage)
     frame = trials_frame(study)
-    settings = study.user_attrs.get("settings", {})
-    value_label = (f"{settings['objective']} of {settings['metric']}, mean of {settings['seeds']} seed(s)"
-                   if settings else "objective")
+    settings = StudySettings.of(study.user_attrs)
+    value_label = settings.value_label() if settings else "objective"
     return StudySummary(name=name, trials=frame, best=best_trials(frame, top), value_label=value_label,
                         beta2_range=_beta2_range(study, frame))
 
@@ -202,8 +189,8 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     (or only ``study_name``) into ``out_dir``; -> the files written.
 
     ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a journal file, ``journal:<path>``
-    or a SQLAlchemy URL, opened read-only (:func:`analysis.studies.open_study_storage`, which raises
-    :class:`analysis.studies.StudyStorageError` for one it cannot read).
+    or a SQLAlchemy URL, opened read-only (:func:`hersd.study.open_study_storage`, which raises
+    :class:`hersd.study.StudyStorageError` for one it cannot read).
     """
     opened = open_study_storage(storage_url_or_db_path)
     if study_name is not None and study_name not in opened.study_names:

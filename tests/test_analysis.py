@@ -20,12 +20,12 @@ from analysis.figures import (LEGEND_CHARACTERS, composition_figures, config_sty
                               mep_figures, q_figures)
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
-from analysis.studies import StudyStorageError, open_study_storage
 from analysis.synthetic import epoch_records, write_run
 from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 from hersd.runlog import RunLogWriter, read_run
+from hersd.study import StudyStorageError, open_study_storage
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
 WINDOW = 3

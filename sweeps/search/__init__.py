@@ -2,9 +2,10 @@
 (docs/SEARCH.md).
 
 Modules, each importing only those before it: ``config`` (the SearchConfig schema and its
-checks), ``storage`` (where a study lives), ``plan`` (what every worker receives; a trial's
-run configs), ``study`` (create/load, sampler, pruner, lost trials), ``objective`` (one
-trial's runs, reports and pruning), ``workers`` (local processes, SLURM), ``cli`` (the command).
+checks), ``plan`` (what every worker receives; a trial's run configs), ``study``
+(create/load, sampler, pruner, lost trials), ``objective`` (one trial's runs, reports and
+pruning), ``workers`` (local processes, SLURM), ``cli`` (the command). Where a study lives,
+what a trial's parameters are and what the study records for the report: :mod:`hersd.study`.
 """
 
 

@@ -11,16 +11,15 @@ from __future__ import annotations
 
 import shlex
 import sys
-from pathlib import Path
 from typing import NoReturn
 
 import optuna
 from optuna.storages import BaseStorage
 
 from hersd.config import ConfigError
+from hersd.study import open_storage, report_command, shown, storage_file
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
-from sweeps.search.storage import SEARCH_FOLDER, open_storage, shown, storage_file
 from sweeps.search.study import count_finished, open_study, requeue_lost_trials, trial_counts
 from sweeps.search.workers import check_slurm, run_local, split_trials, submit_slurm
 
@@ -41,8 +40,6 @@ The study's figures and tables: hersd-report <results_dir> (printed at the end o
 REPORT_REMOVED = ("--report was removed: hersd-search no longer draws figures; draw the study with "
                   "hersd-report <results_dir> (plus --storage <URL> for a search.storage outside "
                   "<results_dir>/search), the command every search prints at its end")
-# Storage files hersd-report reads by itself: directly in <results_dir>/search/ with these suffixes.
-REPORT_FINDS = (".db", ".sqlite", ".sqlite3", ".log", ".journal")
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -66,16 +63,6 @@ def split_overrides(argv: list[str]) -> tuple[str, list[str], list[str]]:
         else:
             train_overrides.append(arg)
     return search_name, search_overrides, train_overrides
-
-
-def report_command(plan: SearchPlan) -> str:
-    """The ``hersd-report`` command that draws this study (and every run of the results folder)."""
-    results = Path(plan.base.results_dir).resolve()
-    command = ["hersd-report", str(results)]
-    path = storage_file(plan.storage)
-    if path is None or path.parent != results / SEARCH_FOLDER or path.suffix not in REPORT_FINDS:
-        command += ["--storage", shown(plan.storage)]  # a password shows as ***: libpq also reads PGPASSWORD
-    return shlex.join(command)
 
 
 def start(argv: list[str]) -> tuple[SearchPlan, BaseStorage, optuna.Study]:
@@ -106,7 +93,8 @@ def launch(plan: SearchPlan, storage: BaseStorage, study: optuna.Study) -> list[
     if plan.search.launcher == "slurm":
         job_ids = submit_slurm(plan, shares, trials_before)
         print(f"submitted SLURM jobs {', '.join(job_ids)}; logs in {plan.study_dir}/slurm. Once they end, draw "
-              f"the study with: {report_command(plan)} (re-run this command to resume a search cut short)")
+              f"the study with: {report_command(plan.base.results_dir, plan.storage)} (re-run this command to "
+              f"resume a search cut short)")
         return None
     return run_local(plan, shares, trials_before)
 
@@ -119,7 +107,7 @@ def summarise(plan: SearchPlan, storage: BaseStorage) -> None:
     if counts["complete"]:
         best = study.best_trial
         print(f"best: trial {best.number}, value {best.value:.4f}, params {best.params}")
-    print(f"figures and tables: {report_command(plan)}")
+    print(f"figures and tables: {report_command(plan.base.results_dir, plan.storage)}")
     target = shown(plan.storage) if "://" in plan.storage else str(storage_file(plan.storage))  # URL or journal
     print(f"dashboard: pip install optuna-dashboard; optuna-dashboard {shlex.quote(target)}")
 

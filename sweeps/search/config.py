@@ -13,21 +13,16 @@ from dataclasses import dataclass, field
 from typing import Any, Optional
 
 from hersd.compose import compose, explain_config_error, group_options, register_schema as store_schema
-from hersd.config import ConfigError, ScheduleConfig
+from hersd.config import ConfigError
 from hersd.resources import available_cores
 from hersd.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
-from hersd.schedules import FIXED_KINDS
+from hersd.study import JOURNAL_PREFIX, KIND_PARAMS, schedule_config, stored_params
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")
 LAUNCHERS = ("local", "slurm")
 METRICS = tuple(name for name, (kind, _) in EPOCH_FIELDS.items()
                 if kind == "number" and name not in OPTIONAL_EPOCH_FIELDS)
-# The schedule kinds a search can draw (eq. 9's, known before the run; not `success`) and the
-# parameters it draws for each.
-KIND_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
-assert tuple(KIND_PARAMS) == FIXED_KINDS
-PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")
 MAX_SLURM_JOBS = 10_000  # worker jobs of one search (SLURM's array limit is usually lower: sbatch says so)
 STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,199}")  # it names files: <study>.db, <study>/
 
@@ -128,9 +123,9 @@ def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
 
 
 def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
-    """The schedule's own checks (:class:`ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
+    """The schedule's own checks (:class:`hersd.config.ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
     try:
-        ScheduleConfig(kind=kind, **{name: float(params[name]) for name in KIND_PARAMS[kind] if name in params})
+        schedule_config({**params, "kind": kind})
     except ConfigError as err:
         raise ConfigError(f"{where}: {err}") from None
 
@@ -190,8 +185,8 @@ def enqueued_kind(params: dict[str, Any], kinds: list[str]) -> str | None:
 
 
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
-    """An enqueued set as Optuna gets it: with its kind when the kind is a searched parameter."""
-    return {"kind": enqueued_kind(params, kinds), **params} if len(kinds) > 1 else dict(params)
+    """An enqueued set as Optuna stores it (:func:`hersd.study.stored_params`), its kind inferred."""
+    return stored_params({"kind": enqueued_kind(params, kinds), **params}, kinds)
 
 
 def check_enqueue(search: SearchConfig) -> None:
@@ -227,6 +222,7 @@ def validate(search: SearchConfig) -> None:
            f"search.study_name={search.study_name!r}: use 1-200 letters, digits, '.', '_' or '-' (it names files)")
     _check(search.storage is None or bool(search.storage.strip()),
            "search.storage is empty; leave it null for the default SQLite file")
+    _check(search.storage != JOURNAL_PREFIX, "search.storage=journal:<path> needs a file path after 'journal:'")
 
 
 def register_schema() -> None:

@@ -22,9 +22,9 @@ import optuna
 from hersd.config import ConfigError, TrainConfig
 from hersd.runlog import LOG_NAME, read_records
 from hersd.runstore import run_dir
-from hersd.schedules import schedule_mean_rates
-from sweeps.search.config import KIND_PARAMS, SpaceConfig
-from sweeps.search.plan import SearchPlan, param_overrides, trial_config
+from hersd.study import KIND_PARAMS, RUN_DIRS_ATTR, mean_rates, param_overrides, trial_config
+from sweeps.search.config import SpaceConfig
+from sweeps.search.plan import SearchPlan
 
 
 def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
@@ -36,11 +36,6 @@ def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
         bounds = getattr(space, name)
         params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)
     return params
-
-
-def mean_rates(params: dict[str, Any], epochs: int) -> tuple[float, float]:
-    """mu_eps of a trial's schedule: exact over its epochs (eq. 10) and the approximation (eq. 11)."""
-    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
 
 
 def seed_objective(values: np.ndarray, objective: str) -> float:
@@ -148,7 +143,7 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
         for seed_index in range(plan.search.seeds):
             cfg = trial_config(plan.base, params, plan.search.first_seed + seed_index, threads)
             run_dirs.append(str(run_dir(cfg)))
-            trial.set_user_attr("run_dirs", run_dirs)  # before training: failed and pruned trials have it too
+            trial.set_user_attr(RUN_DIRS_ATTR, run_dirs)  # before training: failed and pruned trials have it too
             train_seed(trial, plan, progress, params, cfg, seed_index)
     except KeyboardInterrupt:
         trial.set_user_attr("interrupted", True)

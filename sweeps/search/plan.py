@@ -2,26 +2,25 @@
 are made from it.
 
 The training config is composed once, from the command's training overrides, into
-``plan.base``; a trial's run is ``base`` with a new :class:`ScheduleConfig` (so its checks
-run), ``algo.lambda_h`` when searched, the seed and the thread count replaced
-(:func:`trial_config`). Its directory and hash are those ``hersd-train`` gives for the
-equivalent overrides (:func:`param_overrides`).
+``plan.base``; a trial's run is ``base`` with the trial's schedule, ``algo.lambda_h`` when
+searched, the seed and the thread count replaced (:func:`hersd.study.trial_config`). Its
+directory and hash are those ``hersd-train`` gives for the equivalent overrides
+(:func:`hersd.study.param_overrides`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from hersd.compose import compose_train
 from hersd.config import ConfigError, ScheduleConfig, TrainConfig
 from hersd.resources import resolve_threads
 from hersd.runstore import check_writable, config_hash
-from sweeps.search.config import KIND_PARAMS, SearchConfig, enqueued_kind
-from sweeps.search.storage import SEARCH_FOLDER, resolve_storage
+from hersd.study import KIND_PARAMS, SEARCH_FOLDER, StudySettings, default_storage, resolve_storage, trial_config
+from sweeps.search.config import SearchConfig, enqueued_kind
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every
 # run of every trial would share one directory.
@@ -36,8 +35,8 @@ class SearchPlan:
     base: TrainConfig  # the composed training config every run of every trial starts from
     train_overrides: list[str]  # the command's training overrides (recorded with the study and each run)
     study_name: str
-    storage: str  # the storage spec workers open (see sweeps.search.storage)
-    settings: dict[str, Any]  # what the objective depends on; stored with the study and checked on load
+    storage: str  # the storage spec workers open (see hersd.study)
+    settings: StudySettings  # what the objective depends on; stored with the study and checked on load
     study_dir: str  # <results_dir>/search/<study>/: SLURM job logs
 
     @property
@@ -56,37 +55,22 @@ def refuse_searched_keys(train_overrides: list[str], search: SearchConfig) -> No
                               f"search.first_seed); remove it")
 
 
-def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: str | None = None) -> TrainConfig:
-    """One run of a trial: ``base`` with the trial's schedule (and lambda_h), ``seed`` and ``threads``."""
-    kind = params["kind"]
-    schedule = ScheduleConfig(kind=kind, **{name: float(params[name]) for name in KIND_PARAMS[kind] if name in params})
-    algo = replace(base.algo, lambda_h=float(params["lambda_h"])) if "lambda_h" in params else base.algo
-    return replace(base, schedule=schedule, algo=algo, seed=seed, threads=threads or base.threads)
-
-
-def param_overrides(params: dict[str, Any]) -> list[str]:
-    """A trial's parameters as ``hersd-train`` overrides (floats written exactly)."""
-    kind = params["kind"]
-    overrides = [f"schedule={kind}"] + [f"schedule.{name}={float(params[name])!r}" for name in KIND_PARAMS[kind]]
-    return overrides + ([f"algo.lambda_h={float(params['lambda_h'])!r}"] if "lambda_h" in params else [])
-
-
 def run_threads(base: TrainConfig, concurrent_runs: int) -> str:
     """A worker's runs' thread count (a str, as TrainConfig.threads): the user's N, else the cores / concurrent_runs."""
     # Resolved in the worker's process: on a SLURM node the cores are the job's allocation.
     return base.threads if base.threads != "auto" else str(resolve_threads("auto", concurrent_runs))
 
 
-def study_settings(search: SearchConfig, base: TrainConfig) -> dict[str, Any]:
-    """What the objective depends on -> {objective, metric, seeds, first_seed, epochs, task, algo, train_config}."""
+def study_settings(search: SearchConfig, base: TrainConfig) -> StudySettings:
+    """What the objective depends on."""
     # The training config is hashed with the searched fields neutralised, so a study's name
     # stays the same while ranges change, and changes with any other training setting.
     neutral = replace(base, seed=0, schedule=ScheduleConfig())
     if search.space.lambda_h is not None:
         neutral = replace(neutral, algo=replace(neutral.algo, lambda_h=1.0))
-    return {"objective": search.objective, "metric": search.metric, "seeds": search.seeds,
-            "first_seed": search.first_seed, "epochs": base.epochs, "task": base.task.name,
-            "algo": base.algo.name, "train_config": config_hash(neutral)}
+    return StudySettings(objective=search.objective, metric=search.metric, seeds=search.seeds,
+                         first_seed=search.first_seed, epochs=base.epochs, task=base.task.name,
+                         algo=base.algo.name, train_config=config_hash(neutral))
 
 
 def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
@@ -126,9 +110,9 @@ def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str
     check_writable(Path(base.results_dir))  # the runs go here, the default storage below it
     search_dir = Path(base.results_dir).resolve() / SEARCH_FOLDER
     settings = study_settings(search, base)
-    digest = hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:8]
+    digest = hashlib.sha256(json.dumps(asdict(settings), sort_keys=True).encode()).hexdigest()[:8]
     study_name = search.study_name or f"{base.task.name}-{base.algo.name}-{search_name}-{digest}"
-    storage = storage or f"sqlite:///{search_dir / study_name}.db"
+    storage = storage or default_storage(base.results_dir, study_name)
     return SearchPlan(search=search, base=base, train_overrides=list(train_overrides), study_name=study_name,
                       storage=storage, settings=settings,
                       study_dir=str(search_dir / study_name))

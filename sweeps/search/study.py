@@ -7,6 +7,7 @@ import os
 import socket
 import time
 import warnings
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from optuna.storages import BaseStorage
 from optuna.trial import FrozenTrial, TrialState
 
 from hersd.config import ConfigError
+from hersd.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
 from sweeps.search.config import SamplerConfig, enqueued_params
 from sweeps.search.plan import SearchPlan
 
@@ -51,15 +53,15 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
             study = optuna.create_study(storage=storage, study_name=plan.study_name, direction="maximize")
         except optuna.exceptions.DuplicatedStudyError:  # another machine created it first
             return open_study(plan, storage)
-        study.set_user_attr("settings", plan.settings)
-        study.set_user_attr("train_overrides", plan.train_overrides)
+        study.set_user_attr(SETTINGS_ATTR, asdict(plan.settings))
+        study.set_user_attr(TRAIN_OVERRIDES_ATTR, plan.train_overrides)
         for params in plan.search.enqueue:
             study.enqueue_trial(enqueued_params(params, list(plan.search.space.kinds)))
         return study
     study = optuna.load_study(study_name=plan.study_name, storage=storage)
-    stored = study.user_attrs.get("settings")
-    if stored is not None and stored != plan.settings:
-        changed = sorted(k for k in plan.settings if stored.get(k) != plan.settings[k])
+    stored, settings = study.user_attrs.get(SETTINGS_ATTR), asdict(plan.settings)
+    if stored is not None and stored != settings:
+        changed = sorted(k for k in settings if stored.get(k) != settings[k])
         raise ConfigError(f"study {plan.study_name!r} was made with other settings ({', '.join(changed)} differ: "
                           f"{ {k: stored.get(k) for k in changed} }); choose another search.study_name")
     return study
@@ -122,7 +124,7 @@ def requeue_lost_trials(study: optuna.Study, storage: BaseStorage, stale_after_s
     # Runs once, in the process that starts the workers, before any starts. Each lost trial is
     # re-enqueued at most once: its retry carries user attribute retry_of.
     trials = study.get_trials(deepcopy=False)
-    retried = {t.user_attrs["retry_of"] for t in trials if "retry_of" in t.user_attrs}
+    retried = {t.user_attrs[RETRY_OF_ATTR] for t in trials if RETRY_OF_ATTR in t.user_attrs}
     now = time.time()
     requeued = []
     for trial in (t for t in trials if t.number not in retried):
@@ -133,6 +135,6 @@ def requeue_lost_trials(study: optuna.Study, storage: BaseStorage, stale_after_s
         elif not (trial.state == TrialState.FAIL and trial.user_attrs.get("interrupted")):
             continue
         params = {**trial.system_attrs.get("fixed_params", {}), **trial.params}
-        study.enqueue_trial(params, user_attrs={"retry_of": trial.number})
+        study.enqueue_trial(params, user_attrs={RETRY_OF_ATTR: trial.number})
         requeued.append(trial.number)
     return requeued

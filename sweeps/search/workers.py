@@ -22,10 +22,10 @@ import optuna
 
 from hersd.compose import CONFIG_MODULE
 from hersd.config import ConfigError
+from hersd.study import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
 from sweeps.search.plan import SearchPlan, run_threads
-from sweeps.search.storage import open_storage
 from sweeps.search.study import FINISHED_STATES, make_pruner, make_sampler
 
 SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
