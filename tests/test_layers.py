@@ -1,9 +1,11 @@
 """The tree's layers import one way: hersd (one run) <- sweeps (many runs); hersd <- analysis
-(logs to figures). No module imports a layer above it, and no import chain is circular."""
+(logs to figures). No module imports a layer above it, runs one (``python -m``, a subprocess,
+``importlib``: any string naming its modules), and no import chain is circular."""
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -37,6 +39,29 @@ def test_no_module_imports_a_layer_it_may_not():
     assert not wrong, wrong
 
 
+def named_layers(text: str) -> set[str]:
+    """The layers a string names as modules: ``"analysis.report"``, ``"analysis.report:main"``, ``"-m analysis"``."""
+    whole = re.fullmatch(r"(\w+)(\.\w+)*(:\w+)?", text)
+    run = re.findall(r"-m\s+(\w+)", text)
+    return ({whole.group(1)} if whole else set()) | set(run)
+
+
+def test_no_module_runs_a_layer_it_may_not_import():
+    """A module may not reach another layer around the imports, e.g. ``[sys.executable, "-m", "analysis.x"]``."""
+    wrong = []
+    for package in LAYERS:
+        for path in (ROOT / package).rglob("*.py"):
+            tree = ast.parse(path.read_text())
+            docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                          if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                          and node.body and isinstance(node.body[0], ast.Expr)}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+                    if named_layers(node.value) & set(LAYERS) - MAY_IMPORT[package] - {package}:
+                        wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} names {node.value!r}")
+    assert not wrong, wrong
+
+
 def test_no_import_circle():
     graph = project_imports()
     modules = set(graph)
@@ -64,8 +89,8 @@ def test_no_import_circle():
 
 
 def test_light_modules_import_without_torch_or_mujoco():
-    light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.config",
-             "hersd.schedules", "hersd.tasks", "hersd.resources", "sweeps.launch"]
+    light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.study",
+             "hersd.config", "hersd.schedules", "hersd.tasks", "hersd.resources", "sweeps.launch"]
     code = (f"import sys; import {', '.join(light)}; "
             "heavy = [m for m in ('torch', 'mujoco', 'gymnasium_robotics') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
