@@ -8,7 +8,9 @@ when there are many: :func:`start_reading`) into a :class:`RunTable`:
   :data:`hersd.runlog.EPOCH_FIELDS`.
 
 A run's *configuration* label (column ``config``) names what its seeds have in common, so
-seeds are grouped by ``(task, config)``; see :func:`config_label`.
+seeds are grouped by ``(task, config)``; see :func:`config_label`. Runs that share a label
+but not their identity less the seed (:func:`hersd.runstore.run_identity`, the run store's
+own rule) are told apart by the settings that differ.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import pandas as pd
 from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, ScheduleConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, RunLogError, read_records
-from hersd.runstore import HASHED_UNLESS, NOT_HASHED
+from hersd.runstore import HASHED_UNLESS, run_identity
 from hersd.schedules import SCHEDULE_KINDS, effective_beta2, schedule_mean_rate
 
 RUN_COLUMNS = (
@@ -48,8 +50,6 @@ RUN_COLUMNS = (
     "path",           # the log's path relative to the loaded folder
 )
 
-# Config fields that change neither what a run computes nor which configuration it belongs to.
-NOT_CONFIGURATION = ("seed", *NOT_HASHED)
 # The baselines the labels name: HER's relabel rate (the schedule's default), HER's and ARCHER's
 # reward weights (lambda_r, lambda_h); ARCHER halves hindsight rewards (conf/algo/archer.yaml).
 HER_EPS = ScheduleConfig().eps
@@ -119,6 +119,7 @@ def _config_order(run: dict[str, Any]) -> tuple:
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A nested dict -> {"a.b": value}."""
     flat: dict[str, Any] = {}
     for key, value in tree.items():
         if isinstance(value, dict):
@@ -126,6 +127,13 @@ def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             flat[prefix + key] = value
     return flat
+
+
+def configuration(config: dict[str, Any]) -> dict[str, Any]:
+    """The dotted settings that make a run's configuration: its identity (as the run store hashes it)
+    less the seed, with the fields the identity leaves out at their earlier value shown at that value."""
+    identity = {key: value for key, value in run_identity(config).items() if key != "seed"}
+    return {**HASHED_UNLESS, **_flatten(identity)}
 
 
 def _distinguish(labels: list[str], settings: list[dict[str, Any]], groups: list[tuple]) -> list[str]:
@@ -177,9 +185,7 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
         "mu_eps": schedule_mean_rate(schedule, int(config["epochs"])),
         "run_id": str(meta["run_id"]),
     }
-    settings = {**HASHED_UNLESS, **{key: value for key, value in _flatten(config).items()
-                                    if key not in NOT_CONFIGURATION}}  # fields older logs lack: their value then
-    return row, settings
+    return row, configuration(config)
 
 
 def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:

@@ -11,10 +11,13 @@ the search. Light (no torch): a sweep plans hundreds of runs with it.
 The hash covers every config field that changes what the run computes
 (:data:`NOT_HASHED` lists the others), so two configs never share a directory and the same
 config always maps to the same one: that is what lets sweeps skip and resume runs.
+:func:`run_identity` is that identity, for a config or for the config a log's metadata holds
+(however old the log): the report groups runs with it too.
 """
 
 from __future__ import annotations
 
+import copy
 import fcntl
 import hashlib
 import json
@@ -53,27 +56,32 @@ def schedule_tag(schedule: ScheduleConfig) -> str:
     return f"exponential-b1_{schedule.beta1:g}-b2_{schedule.beta2:g}"
 
 
-def hashed_fields(cfg: TrainConfig) -> dict[str, Any]:
-    """The config as a nested dict, less :data:`NOT_HASHED` and the :data:`HASHED_UNLESS` defaults;
-    of ``learner`` only the learner in use and its own settings, and nothing for ddpg (the
-    learner of every run made before learners were a setting)."""
-    content = {k: v for k, v in asdict(cfg).items() if k not in NOT_HASHED}
-    learner = content.pop("learner")
+def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
+    """What identifies a run: its config as a nested dict, less :data:`NOT_HASHED` and the
+    :data:`HASHED_UNLESS` defaults; of ``learner`` only the learner in use and its own settings,
+    and nothing for ddpg (the learner of every run made before learners were a setting).
+
+    ``config`` is a TrainConfig or its dict as a log's ``/run/meta`` holds it; a log written
+    before a field existed has the identity of a new log of the same run.
+    """
+    content = asdict(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
+    content = {key: value for key, value in content.items() if key not in NOT_HASHED}
+    learner = content.pop("learner", {"name": "ddpg"})
     if learner["name"] != "ddpg":
         content["learner"] = {"name": learner["name"], learner["name"]: learner[learner["name"]]}
     for dotted, earlier_value in HASHED_UNLESS.items():
         *parents, leaf = dotted.split(".")
         node = content
         for key in parents:
-            node = node[key]
-        if node.get(leaf) == earlier_value:
+            node = node.get(key, {})
+        if leaf in node and node[leaf] == earlier_value:
             del node[leaf]
     return content
 
 
-def config_hash(cfg: TrainConfig) -> str:
-    """8 hex digits identifying everything that determines the run's result."""
-    return hashlib.sha256(json.dumps(hashed_fields(cfg), sort_keys=True).encode()).hexdigest()[:8]
+def config_hash(config: TrainConfig | dict[str, Any]) -> str:
+    """8 hex digits identifying everything that determines the run's result (:func:`run_identity`)."""
+    return hashlib.sha256(json.dumps(run_identity(config), sort_keys=True).encode()).hexdigest()[:8]
 
 
 def run_dir(cfg: TrainConfig) -> Path:

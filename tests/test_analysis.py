@@ -3,6 +3,7 @@ the report command."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -25,6 +26,7 @@ from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 from hersd.runlog import RunLogWriter, read_run
+from hersd.runstore import config_hash
 from hersd.study import StudyStorageError, open_study_storage
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
@@ -198,6 +200,24 @@ def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
     write_run(tmp_path / "c", make_config(seed=1, epochs=6), np.zeros(6))
     labels = load_runs(tmp_path).runs.groupby("config", observed=True)["seed"].apply(list).to_dict()
     assert labels == {"HER (epochs=4)": [0], "HER (epochs=6)": [0, 1]}
+
+
+def test_a_log_made_before_fields_existed_shares_the_configuration_of_new_logs(tmp_path):
+    write_run(tmp_path / "new", make_config(seed=1), np.zeros(6))
+    config = dataclasses.asdict(make_config())
+    for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
+        del config[key]
+    for key in ("window", "eps_min"):
+        del config["schedule"][key]
+    (tmp_path / "old").mkdir()
+    writer = RunLogWriter(tmp_path / "old" / "run.mcap", {
+        "run_id": config_hash(config), "config": config, "seed": 0, "versions": {}, "command": "old",
+        "start_time": "2024-01-01T00:00:00+0000", "resumed_from_epoch": 0})
+    for record in epoch_records(make_config(), np.zeros(6)):
+        writer.write_epoch(record)
+    writer.finish(6)
+    assert config_hash(config) == config_hash(make_config())
+    assert list(load_runs(tmp_path).runs["config"]) == ["HER", "HER"]
 
 
 def test_a_label_spans_tasks_with_different_budgets_and_lookalikes_get_distinct_styles(tmp_path):

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import subprocess
+from dataclasses import asdict
+from pathlib import Path
+
 import pytest
 
 from hersd.compose import compose, compose_train, group_options
 from hersd.config import TrainConfig
-from hersd.runstore import NOT_HASHED, config_hash, hashed_fields
+from hersd.runlog import read_run
+from hersd.runstore import NOT_HASHED, config_hash, run_identity
 from hersd.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
@@ -97,12 +102,42 @@ def test_golden_config_hash(overrides, golden):
     assert config_hash(compose_train(overrides)) == golden
 
 
+def committed_logs() -> list[Path]:
+    """The run logs committed under results/ (skips outside a git checkout)."""
+    root = Path(__file__).resolve().parent.parent
+    listed = subprocess.run(["git", "ls-files", "-z", "--", "results/*run.mcap"], cwd=root, capture_output=True)
+    if listed.returncode != 0:
+        pytest.skip("not a git checkout")
+    return [root / name for name in listed.stdout.decode().split("\0") if name]
+
+
+def test_every_committed_log_keeps_its_directory():
+    """The hash recomputed from the config in a log's metadata is its folder's: a schema change moved no run."""
+    logs = committed_logs()
+    assert logs
+    for path in logs:
+        meta = read_run(path).meta
+        recomputed = config_hash(meta["config"])
+        assert (path.parent.name, meta["run_id"]) == (f"seed{meta['seed']}-{recomputed}", recomputed), path
+
+
+def test_a_config_and_its_logged_dict_have_one_identity_however_old_the_log():
+    cfg = compose_train(["task=push", "learner=td3", "schedule=paper_exp_050"])
+    assert run_identity(asdict(cfg)) == run_identity(cfg)
+    old = asdict(compose_train(["task=push"]))
+    for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
+        del old[key]
+    for key in ("window", "eps_min"):
+        del old["schedule"][key]
+    assert run_identity(old) == run_identity(compose_train(["task=push"]))
+
+
 def test_run_identity_ignores_where_and_how_a_run_is_executed():
     base = compose_train(["task=push"])
     for override in ("results_dir=/elsewhere", "quiet=true", "checkpoint_every=5", "keep_checkpoint=true",
                      "threads=2", "device=cpu"):
         assert config_hash(compose_train(["task=push", override])) == config_hash(base), override
-    assert not set(NOT_HASHED) & set(hashed_fields(base))
+    assert not set(NOT_HASHED) & set(run_identity(base))
     assert config_hash(compose_train(["task=push", "seed=1"])) != config_hash(base)
 
 
