@@ -48,6 +48,8 @@ LEGEND_CHARACTERS = 34  # legend entries are wrapped to lines of at most this ma
 GLYPH_WIDTH = 0.6  # average width of a DejaVu Sans glyph, in em: how many characters fit a width
 TITLE_SIZE, PANEL_TITLE_SIZE, LEGEND_SIZE = 12, 10, 8  # points
 EPOCH_TICKS = 4  # intervals between epoch ticks, at most
+IN_PROGRESS = " (in progress)"  # appended to a config's legend label for its unfinished runs
+IN_PROGRESS_STYLE = {"linestyle": (0, (3, 2)), "linewidth": 0.8, "alpha": 0.8}  # thin dashes, each run on its own
 
 
 @dataclass
@@ -209,11 +211,34 @@ def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None
                   bbox_to_anchor=(1 - (legend_width + 0.05) / width, top), **options)
 
 
-def _draw_curve(axis, medians: pd.DataFrame, config: str, style: dict) -> None:
-    """Median line and min-max band of one config (``medians``: one task's median curves)."""
+def _draw_curve(axis, medians: pd.DataFrame, in_progress: pd.DataFrame, config: str, style: dict) -> None:
+    """Median line and min-max band of one config's complete runs (``medians``: one task's median
+    curves), then each of its runs in progress on its own, thin and dashed (``in_progress``: their
+    smoothed curves)."""
     curve = medians[medians["config"] == config]
-    axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
-    axis.plot(curve["epoch"], curve["median"], label=_legend_label(config), **style)
+    if not curve.empty:
+        axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
+        axis.plot(curve["epoch"], curve["median"], label=_legend_label(config), **style)
+    for _, run in in_progress[in_progress["config"] == config].groupby("run"):
+        axis.plot(run["epoch"], run["smoothed"], color=style["color"], label=_legend_label(config + IN_PROGRESS),
+                  **IN_PROGRESS_STYLE)
+
+
+def _in_progress(analysis: Analysis) -> pd.DataFrame:
+    """The smoothed curves of the runs in progress."""
+    return analysis.curves[~analysis.curves["complete"]]
+
+
+def _legend_labels(configs: list[str], in_progress: pd.DataFrame) -> list[str]:
+    """The legend labels of these configs: each, and ``<config> (in progress)`` for those with runs in progress."""
+    unfinished = set(in_progress["config"])
+    return [*configs, *(config + IN_PROGRESS for config in configs if config in unfinished)]
+
+
+def _in_progress_note(in_progress: pd.DataFrame) -> str:
+    """The caption's sentence about runs in progress (none: empty)."""
+    return (" Thin dashed lines: runs still in progress, each seed's own moving average; they enter neither the "
+            "median, the band nor any table." if not in_progress.empty else "")
 
 
 def _success_ylabel(window: int) -> str:
@@ -278,7 +303,7 @@ def composition_figures(analysis: Analysis) -> list[ReportFigure]:
                   and task_shares["epoch"].max() >= metrics.PAPER_COMPOSITION_EPOCH else None)
         caption = (f"{task_title(task)}: share of each kind of transition in the sampled minibatches, per epoch: real "
                    "transitions whose reward says success (blue) or failure (red), and transitions whose goal was "
-                   "relabelled in hindsight (purple). Median over seeds of each share, rescaled to sum to 1."
+                   "relabelled in hindsight (purple). Median over the complete seeds of each share, rescaled to sum to 1."
                    + (f" The black line marks epoch {marked}, where the paper gives HER's composition (table "
                       "below)." if marked else ""))
         found.append(ReportFigure(f"composition_{task}", f"{task_title(task)}: minibatch composition (Fig. 2)",
@@ -340,9 +365,12 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
     configs = _config_table(analysis)
     styles = config_styles(analysis)
     found = []
-    for task in ordered_tasks(analysis.medians["task"]):
+    unfinished = _in_progress(analysis)
+    for task in ordered_tasks(analysis.curves["task"]):
         medians = analysis.medians[analysis.medians["task"] == task]
-        present = configs.loc[[c for c in configs.index if c in set(medians["config"])]]
+        in_progress = unfinished[unfinished["task"] == task]
+        run_configs = set(analysis.curves.loc[analysis.curves["task"] == task, "config"])
+        present = configs.loc[[c for c in configs.index if c in run_configs]]
         for weights, panels in _learning_panels(present):
             if weights is None:
                 name, title = f"curves_{task}", f"{task_title(task)}: learning curves"
@@ -352,20 +380,20 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
                 name = f"curves_{task}_lr{weights[0]:g}_lh{weights[1]:g}"
                 title = f"{task_title(task)}: decay schedules vs {versus} ({_weights_text(*weights)})"
             caption = (f"{title}. Each seed's test success is smoothed by a trailing {analysis.window}-epoch moving "
-                       "average (the first epochs average the epochs so far); lines are the median over seeds, "
-                       "shaded bands the range (min to max) over seeds.")
-            draw = partial(_draw_learning_curves, title, medians, panels, styles, analysis.window)
+                       "average (the first epochs average the epochs so far); lines are the median over the "
+                       "complete seeds, shaded bands their range (min to max)." + _in_progress_note(in_progress))
+            draw = partial(_draw_learning_curves, title, medians, in_progress, panels, styles, analysis.window)
             found.append(ReportFigure(name, f"{title} (Figs. 4-9)", caption, draw))
     return found
 
 
-def _draw_learning_curves(title: str, medians: pd.DataFrame, panels: list[tuple[str, list[str]]],
-                          styles: dict[str, dict], window: int) -> Figure:
-    legend_width = _legend_width(config for _, shown in panels for config in shown)
+def _draw_learning_curves(title: str, medians: pd.DataFrame, in_progress: pd.DataFrame,
+                          panels: list[tuple[str, list[str]]], styles: dict[str, dict], window: int) -> Figure:
+    legend_width = _legend_width(_legend_labels([config for _, shown in panels for config in shown], in_progress))
     figure, axes = _panels(len(panels), title, legend_width=legend_width)
     for axis, (panel_title, shown) in zip(axes, panels):
         for config in shown:
-            _draw_curve(axis, medians, config, styles[config])
+            _draw_curve(axis, medians, in_progress, config, styles[config])
         _set_title(axis, panel_title)
         axis.set_ylim(-0.02, 1.02)
     _label_outer(axes, _success_ylabel(window))
@@ -382,7 +410,8 @@ def q_figures(analysis: Analysis) -> list[ReportFigure]:
     q_values = analysis.q_means[analysis.q_means["config"].isin(shown)]
     if q_values.empty or not (configs.loc[shown, "schedule"] != "constant").any():
         return []
-    caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over seeds, for HER and the "
+    caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over the complete seeds, "
+               "for HER and the "
                "schedules with the same reward weights (λr = λh = 1); linear decays solid, exponential "
                "dash-dot. An early overestimate that falls sooner means the critic is corrected sooner.")
     return [ReportFigure("q_mean", "Mean Q-value during training (Fig. 10)", caption,
@@ -414,26 +443,30 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
     partners = {config for config, row in configs[~configs["mep"]].iterrows()
                 if (mep_configs[settings] == row[settings]).all(axis=1).any()}
     shown = [c for c in configs.index if c in partners or c in mep_configs.index]
-    medians = analysis.medians[analysis.medians["config"].isin(shown)]
-    if not medians["config"].isin(mep_configs.index).any():
+    curves = analysis.curves[analysis.curves["config"].isin(shown)]
+    if not curves["config"].isin(mep_configs.index).any():
         return []
+    medians, in_progress = analysis.medians[analysis.medians["config"].isin(shown)], _in_progress(analysis)
+    in_progress = in_progress[in_progress["config"].isin(shown)]
     caption = ("Configurations with MEP (dashed) beside the same configuration without it: median over seeds of "
-               f"the {analysis.window}-epoch moving average of test success, range over seeds shaded.")
+               f"the {analysis.window}-epoch moving average of test success, range over seeds shaded."
+               + _in_progress_note(in_progress))
+    tasks = ordered_tasks(curves.loc[curves["config"].isin(mep_configs.index), "task"])
     return [ReportFigure("mep", "MEP comparison (Fig. 11)", caption,
-                         partial(_draw_mep, medians, shown, list(mep_configs.index), config_styles(analysis),
+                         partial(_draw_mep, tasks, curves, medians, in_progress, shown, config_styles(analysis),
                                  analysis.window))]
 
 
-def _draw_mep(medians: pd.DataFrame, shown: list[str], mep_configs: list[str], styles: dict[str, dict],
-              window: int) -> Figure:
-    tasks = ordered_tasks(medians.loc[medians["config"].isin(mep_configs), "task"])
-    legend_width = _legend_width(shown)
+def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_progress: pd.DataFrame,
+              shown: list[str], styles: dict[str, dict], window: int) -> Figure:
+    legend_width = _legend_width(_legend_labels(shown, in_progress))
     figure, axes = _panels(len(tasks), "Episode prioritisation (MEP) with and without relabel-rate decay",
                            legend_width=legend_width)
     for axis, task in zip(axes, tasks):
-        task_medians = medians[medians["task"] == task]
-        for config in [c for c in shown if c in set(task_medians["config"])]:
-            _draw_curve(axis, task_medians, config, styles[config])
+        present = set(curves.loc[curves["task"] == task, "config"])
+        for config in [c for c in shown if c in present]:
+            _draw_curve(axis, medians[medians["task"] == task], in_progress[in_progress["task"] == task], config,
+                        styles[config])
         _set_title(axis, task_title(task))
         axis.set_ylim(-0.02, 1.02)
     _label_outer(axes, _success_ylabel(window))

@@ -4,10 +4,12 @@ Vocabulary (each formula is restated in docs/ANALYSIS.md):
 
 - *smoothed curve* of a run: trailing moving average of test success over ``window``
   epochs; the first epochs average the epochs so far (min_periods=1).
-- *median curve* of a (task, config): at each epoch, the median over the seeds that reached
-  that epoch of their smoothed curves; ``low`` / ``high`` are the min / max over those seeds.
-- *horizon* of a (task, config): the last epoch every one of its seeds completed.
-- *final success* of a seed: its smoothed curve at the horizon.
+- *in progress*: a run whose log has no completion marker (still running, or stopped). It
+  enters no statistic: not the median curves, tables, IQM, P(improve), composition or mean Q;
+  the learning-curve figures draw it on its own (``Analysis.curves``, ``complete`` False).
+- *median curve* of a (task, config): at each epoch, the median over its complete seeds of
+  their smoothed curves; ``low`` / ``high`` are the min / max over those seeds.
+- *final success* of a complete seed: its smoothed curve at its last epoch K.
 """
 
 from __future__ import annotations
@@ -35,17 +37,20 @@ SHARE_COLUMNS = ("share_real_success", "share_real_failure", "share_hindsight")
 PAPER_COMPOSITION_TASK = "push"
 PAPER_COMPOSITION_EPOCH = 150
 PAPER_COMPOSITION = {"share_real_success": 0.053, "share_hindsight": 0.80, "share_real_failure": 0.147}
+SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "auc",
+                   *(f"epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
+                   f"p_improve_{BASELINE}"]
 
 
 def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
     """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1).
 
-    ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, epoch,
+    ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, complete, epoch,
     success (raw), smoothed; sorted by run then epoch.
     """
     if window < 1:
         raise ValueError(f"the smoothing window must be >= 1 epoch, got {window}")
-    curves = epochs[["task", "config", "run", "seed", "epoch", "test_success"]].sort_values(["run", "epoch"])
+    curves = epochs[["task", "config", "run", "seed", "complete", "epoch", "test_success"]].sort_values(["run", "epoch"])
     curves = curves.rename(columns={"test_success": "success"}).reset_index(drop=True)
     rolling = curves.groupby("run", sort=False)["success"].rolling(window, min_periods=1).mean()
     curves["smoothed"] = rolling.to_numpy()
@@ -59,20 +64,19 @@ def median_curves(curves: pd.DataFrame) -> pd.DataFrame:
     return summary.reset_index()
 
 
-def horizons(curves: pd.DataFrame) -> pd.Series:
-    """Per (task, config): the last epoch that every seed completed (min over runs of max epoch)."""
-    return curves.groupby(["task", "config", "run"], observed=True)["epoch"].max().groupby(level=GROUP, observed=True).min()
-
-
 def final_success(curves: pd.DataFrame) -> pd.DataFrame:
-    """Per seed: the smoothed curve at its (task, config)'s horizon.
+    """Per seed: its smoothed curve at its last epoch (``curves``: :func:`smoothed_curves` of complete runs).
 
     Returns columns task, config, run, seed, final.
     """
-    horizon = horizons(curves).rename("horizon").reset_index()
-    at_horizon = curves.merge(horizon, on=GROUP)
-    at_horizon = at_horizon[at_horizon["epoch"] == at_horizon["horizon"]]
-    return at_horizon[[*GROUP, "run", "seed", "smoothed"]].rename(columns={"smoothed": "final"}).reset_index(drop=True)
+    last = curves.sort_values(["run", "epoch"]).groupby("run", sort=False).tail(1)
+    return last[[*GROUP, "run", "seed", "smoothed"]].rename(columns={"smoothed": "final"}).reset_index(drop=True)
+
+
+def run_states(runs: pd.DataFrame) -> pd.Series:
+    """Per run (the run table): ``complete`` or ``in progress (epoch N of K)``."""
+    return pd.Series(["complete" if complete else f"in progress (epoch {done} of {total})" for complete, done, total
+                      in zip(runs["complete"], runs["epochs_done"], runs["total_epochs"])], index=runs.index, dtype=object)
 
 
 def first_epoch_reaching(epoch: np.ndarray, values: np.ndarray, threshold: float) -> float:
@@ -143,29 +147,26 @@ def her_baselines(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
 
 
 def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
-    """One row per (task, config).
+    """One row per (task, config) with complete runs; only they enter it.
 
-    Columns: task, config, seeds, complete (runs that finished), horizon, final_median
-    (median over seeds of final success), auc (mean over epochs 1..horizon of the median
-    curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve reaches it, NaN if
-    never), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap interval),
-    p_improve_HER (probability of improvement on the seeds of its :func:`her_baselines` HER
-    configuration; NaN without one).
+    ``curves``: :func:`smoothed_curves` of the complete runs; ``runs``: the run table (every run).
+    Columns: task, config, seeds (complete runs), in_progress (its runs left out, not
+    complete), final_median (median over seeds of final success), auc (mean over epochs 1..K
+    of the median curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve
+    reaches it, NaN if never), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap
+    interval), p_improve_HER (probability of improvement on the seeds of its
+    :func:`her_baselines` HER configuration; NaN without one).
     """
-    baselines = her_baselines(runs)
+    baselines = her_baselines(runs[runs["complete"]])
     finals = {key: group["final"].to_numpy() for key, group in final_success(curves).groupby(GROUP, observed=True)}
-    horizon = horizons(curves)
-    complete = runs.groupby(GROUP, observed=True)["complete"].sum()
+    in_progress = (~runs["complete"]).groupby([runs["task"], runs["config"]], observed=True).sum()
     rows = []
     for (task, config), median in median_curves(curves).groupby(GROUP, observed=True, sort=True):
-        last = horizon[(task, config)]
-        median = median[median["epoch"] <= last]
         final = finals[(task, config)]
         low, high = iqm_interval([final], seed=seed)
         row = {
-            "task": task, "config": config, "seeds": len(final), "complete": int(complete[(task, config)]),
-            "horizon": int(last), "final_median": float(np.median(final)),
-            "auc": float(median["median"].mean()),
+            "task": task, "config": config, "seeds": len(final), "in_progress": int(in_progress[(task, config)]),
+            "final_median": float(np.median(final)), "auc": float(median["median"].mean()),
         }
         for threshold in SUCCESS_THRESHOLDS:
             row[f"epochs_to_{threshold:g}"] = first_epoch_reaching(median["epoch"].to_numpy(),
@@ -175,7 +176,7 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
         row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
                                         if (task, baseline) in finals else float("nan"))
         rows.append(row)
-    table = pd.DataFrame.from_records(rows)
+    table = pd.DataFrame.from_records(rows, columns=SUMMARY_COLUMNS)
     for threshold in SUCCESS_THRESHOLDS:
         table[f"epochs_to_{threshold:g}"] = table[f"epochs_to_{threshold:g}"].astype("Int64")  # empty when never
     table["config"] = pd.Categorical(table["config"], categories=curves["config"].cat.categories, ordered=True)
@@ -189,8 +190,9 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
     Columns: config, tasks, seeds, iqm (IQM of the pooled final successes), iqm_low,
     iqm_high (bootstrap stratified by task), p_improve_HER (mean over the tasks where the
     config has a :func:`her_baselines` HER configuration of the per-task probability).
+    ``curves`` and ``runs`` as for :func:`summary_table`: only complete runs enter.
     """
-    baselines = her_baselines(runs)
+    baselines = her_baselines(runs[runs["complete"]])
     finals = final_success(curves)
     per_task = {key: group["final"].to_numpy() for key, group in finals.groupby(GROUP, observed=True)}
     rows = []
@@ -203,7 +205,8 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
         rows.append({"config": config, "tasks": len(tasks), "seeds": int(sum(len(s) for s in strata)),
                      "iqm": interquartile_mean(np.concatenate(strata)), "iqm_low": low, "iqm_high": high,
                      f"p_improve_{BASELINE}": float(np.mean(improvements)) if improvements else float("nan")})
-    return pd.DataFrame.from_records(rows)
+    return pd.DataFrame.from_records(rows, columns=["config", "tasks", "seeds", "iqm", "iqm_low", "iqm_high",
+                                                    f"p_improve_{BASELINE}"])
 
 
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:
@@ -287,8 +290,9 @@ def mean_rate_lines(beta2_values: list[float], total_epochs: int, points: int = 
 class Analysis:
     """Everything the figures and the report draw from.
 
-    runs / epochs: the tables of :mod:`analysis.load`; curves: :func:`smoothed_curves`;
-    medians: :func:`median_curves`; summary / aggregate: the two tables; shares:
+    runs / epochs: the tables of :mod:`analysis.load` (every run); curves: :func:`smoothed_curves`
+    of every run (``complete`` False: in progress, drawn on its own); the rest from complete
+    runs only: medians: :func:`median_curves`; summary / aggregate: the two tables; shares:
     :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
     :func:`composition_versus_paper`; window: the smoothing window in epochs.
     """
@@ -306,10 +310,12 @@ class Analysis:
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
-    """Compute every table the report needs (runs without a completed epoch are left out)."""
+    """Compute every table the report needs; runs in progress enter none of them (only ``curves``)."""
     curves = smoothed_curves(epochs, window)
-    shares = composition(epochs)
-    return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(curves),
-                    summary=summary_table(curves, runs[runs["epochs_done"] > 0], seed=seed),
-                    aggregate=aggregate_table(curves, runs, seed=seed), shares=shares, q_means=mean_q(epochs),
-                    composition_vs_paper=composition_versus_paper(shares, runs), window=window)
+    complete_curves, complete_epochs = curves[curves["complete"]], epochs[epochs["complete"]]
+    shares = composition(complete_epochs)
+    return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(complete_curves),
+                    summary=summary_table(complete_curves, runs, seed=seed),
+                    aggregate=aggregate_table(complete_curves, runs, seed=seed), shares=shares,
+                    q_means=mean_q(complete_epochs),
+                    composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window)

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 import pandas as pd
 
 from analysis.load import ReportInputError, RunTable, start_reading
-from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK
+from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, run_states
 from hersd.study import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
 from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
@@ -46,11 +46,14 @@ FORMATS = ("png", "svg", "pdf")
 DPI = 100
 FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
 MIME = {"png": "image/png", "svg": "image/svg+xml"}
-RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "epochs_done", "total_epochs", "complete", "damaged", "run_id"]
+RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", "damaged", "run_id"]
 TABLE_NOTES = {
-    "summary": ("One row per task and configuration. <b>final_median</b>: median over seeds of each seed's "
-                "smoothed success at the horizon (the last epoch all its seeds completed). <b>auc</b>: mean over "
-                "epochs 1..horizon of the median smoothed curve (area under it, normalised to [0, 1]). "
+    "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
+                "other table: <b>seeds</b> counts them, <b>in_progress</b> the runs left out (not complete: "
+                "running or stopped; they are drawn on their own in the learning curves). "
+                "<b>final_median</b>: median over seeds of each seed's smoothed success at its last epoch K. "
+                "<b>auc</b>: mean over epochs 1..K of the median smoothed curve (area under it, normalised to "
+                "[0, 1]). "
                 "<b>epochs_to_0.5 / 0.9</b>: first epoch the median smoothed curve reaches 0.5 / 0.9 (empty: never). "
                 "<b>iqm</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
                 "interval [iqm_low, iqm_high] (seeded, 2000 resamples). <b>p_improve_HER</b>: P(X &gt; Y) + "
@@ -172,7 +175,8 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     """The report page: summary tables, figures (the composition table after its figure), studies, runs."""
     runs = table.runs
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
-             f"<p>{_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete), "
+             f"<p>{_count(len(runs), 'run')} ({int((~runs['complete']).sum())} in progress: drawn in the learning "
+             "curves only, left out of every table and median), "
              f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
              f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
     skipped = [f"log {line}" for line in table.skipped] + [f"study storage {line}" for line in studies.skipped]
@@ -195,7 +199,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
-    parts += ["<h2>Runs</h2>", html_table(runs[RUN_LIST_COLUMNS])]
+    parts += ["<h2>Runs</h2>", html_table(runs.assign(state=run_states(runs))[RUN_LIST_COLUMNS])]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
 
@@ -282,7 +286,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     tables = {"summary": analysis.summary, "aggregate": analysis.aggregate}
     if not analysis.composition_vs_paper.empty:
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
-    written = _write_tables({**tables, "runs": runs.drop(columns="run")}, out / "tables")
+    written = _write_tables({**tables, "runs": runs.assign(state=run_states(runs)).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):]),

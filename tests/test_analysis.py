@@ -103,7 +103,7 @@ def test_smoothed_median_curve_and_range_equal_hand_values(analysed):
 
 def test_summary_row_equals_hand_values(analysed):
     her = analysed.summary[analysed.summary["config"] == "HER"].iloc[0]
-    assert her["seeds"] == 5 and her["complete"] == 5 and her["horizon"] == 6
+    assert her["seeds"] == 5 and her["in_progress"] == 0
     assert her["final_median"] == pytest.approx(0.8)
     assert her["auc"] == pytest.approx(sum(HER_MEDIAN) / 6)  # (0 + .15 + .3 + .5333 + .6 + .8) / 6 = 0.39722
     assert her["auc"] == pytest.approx(0.397222, abs=1e-6)
@@ -119,17 +119,64 @@ def test_summary_row_equals_hand_values(analysed):
     assert linear["p_improve_HER"] == pytest.approx(4 / 10)
 
 
-def test_unfinished_seed_sets_the_horizon(tmp_path):
+def write_campaign_midway(folder: Path, in_progress: bool = True) -> None:
+    """Two complete seeds each of HER and linear b1=0.5; with ``in_progress``, besides them a HER
+    seed that succeeds at once (4 of 6 epochs), a linear seed that never does (5 of 6 epochs) and
+    a configuration with only an unfinished run (exp, 3 of 6 epochs)."""
+    linear, exponential = ScheduleConfig("linear", beta1=0.5), ScheduleConfig("exponential", beta1=0.5, beta2=0.5)
     for seed in (0, 1):
-        write_run(tmp_path / str(seed), make_config(seed=seed), np.array(HER_SUCCESS[seed]))
-    write_run(tmp_path / "2", make_config(seed=2), np.array(HER_SUCCESS[2][:4]), complete=False)  # still running
-    table = load_runs(tmp_path)
-    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
-    row = analysis.summary.iloc[0]
-    assert (row["seeds"], row["complete"], row["horizon"]) == (3, 2, 4)
-    assert row["final_median"] == pytest.approx(0.3)  # smoothed at epoch 4: 0.3, 0.5333, 0.1
-    assert row["auc"] == pytest.approx((0 + 0 + 0.1 + 0.3) / 4)  # medians 0, 0, 0.1, 0.3
-    assert analysis.medians["n_seeds"].tolist() == [3, 3, 3, 3, 2, 2]
+        write_run(folder / f"her{seed}", make_config(seed=seed), np.array(HER_SUCCESS[seed]))
+        write_run(folder / f"linear{seed}", make_config(schedule=linear, seed=seed), np.array(LINEAR_SUCCESS[seed]))
+    if in_progress:
+        write_run(folder / "her2", make_config(seed=2), np.ones(4), complete=False)
+        write_run(folder / "linear2", make_config(schedule=linear, seed=2), np.zeros(5), complete=False)
+        write_run(folder / "exp0", make_config(schedule=exponential), np.ones(3), complete=False)
+
+
+def test_runs_in_progress_enter_no_statistic(tmp_path):
+    """Every table, median and mean equals that of the complete runs alone (a test that fails if an
+    unfinished run counted anywhere: each would move the numbers)."""
+    write_campaign_midway(tmp_path / "complete", in_progress=False)
+    write_campaign_midway(tmp_path / "midway")
+    alone, midway = (metrics.analyse(*_tables(tmp_path / name), WINDOW) for name in ("complete", "midway"))
+    assert set(midway.curves.loc[~midway.curves["complete"], "config"]) == {"HER", "linear b1=0.5",
+                                                                          "exp b1=0.5 b2=0.5"}
+    summary = midway.summary.set_index("config")
+    assert list(summary.index) == ["HER", "linear b1=0.5"]  # exp has no complete run: no row
+    assert summary["seeds"].tolist() == [2, 2] and summary["in_progress"].tolist() == [1, 1]
+    assert summary.loc["HER", "final_median"] == pytest.approx((0.8 + 2.6 / 3) / 2)  # seeds 0 and 1 at epoch 6
+    assert summary.loc["linear b1=0.5", "p_improve_HER"] == pytest.approx(2 / 4)  # 0.95 beats both, 0.2 neither
+    assert list(midway.aggregate["config"]) == ["HER", "linear b1=0.5"]
+    for name in ("summary", "aggregate", "medians", "shares", "q_means"):
+        pd.testing.assert_frame_equal(_comparable(getattr(midway, name)), _comparable(getattr(alone, name)))
+    assert (midway.medians["n_seeds"] == 2).all()
+
+
+def _comparable(table: pd.DataFrame) -> pd.DataFrame:
+    """A table without what names the runs left out (their count, the categories of their labels)."""
+    return table.drop(columns="in_progress", errors="ignore").astype({"config": str})
+
+
+def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path):
+    write_campaign_midway(tmp_path)
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    (figure,) = learning_curve_figures(analysis)
+    assert "Thin dashed lines: runs still in progress" in figure.caption
+    linear_panel, exp_panel = figure.draw().axes
+    lines = {line.get_label(): line for line in linear_panel.get_lines()}
+    assert set(lines) == {"HER", "HER (in progress)", "linear b1=0.5", "linear b1=0.5 (in progress)"}
+    assert lines["HER (in progress)"].get_ydata().tolist() == [1.0] * 4  # the run's own moving average
+    assert lines["HER (in progress)"].get_linewidth() < lines["HER"].get_linewidth()
+    assert lines["HER (in progress)"].get_linestyle() == "--"
+    assert lines["HER"].get_ydata()[-1] == pytest.approx((0.8 + 2.6 / 3) / 2)  # the complete seeds' median
+    exp_lines = {line.get_label() for line in exp_panel.get_lines()}
+    assert exp_lines == {"HER", "HER (in progress)", "exp b1=0.5 b2=0.5 (in progress)"}  # drawn, and marked
+
+    assert report_main([str(tmp_path), "--out", str(tmp_path / "report"), "--smooth", str(WINDOW)]) == 0
+    states = pd.read_csv(tmp_path / "report" / "tables" / "runs.csv").set_index("path")["state"]
+    assert states["her0/run.mcap"] == "complete" and states["her2/run.mcap"] == "in progress (epoch 4 of 6)"
+    page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
+    assert "in progress (epoch 3 of 6)" in page and "7 runs (3 in progress" in page
 
 
 def test_probability_of_improvement_counts_ties_half():
