@@ -139,10 +139,13 @@ def campaign_pid(results_dir: Path) -> int | None:
         return None
     try:
         command = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except OSError:  # no /proc: trust the live pid
         return pid
-    # not a reused pid, nor an exited (zombie) process: the runner started by start, or hersd-campaign run
-    return pid if "sweeps.campaign" in command or "hersd-campaign" in command else None
+    if state == "Z":  # exited, not yet reaped
+        return None
+    # the runner start detached, or hersd-campaign run, not a reused pid (empty: just started, exec under way)
+    return pid if not command or "sweeps.campaign" in command or "hersd-campaign" in command else None
 
 
 def _pid_file(results_dir: Path) -> int | None:
@@ -194,8 +197,13 @@ def status(campaign: str, results_dir: Path) -> int:
     plan = plan_runs(load_campaign(campaign), results_dir)
     pid = campaign_pid(results_dir)
     busy = runs_in_training(results_dir)
-    print(f"campaign {campaign} in {results_dir}: " + (f"running (pid {pid}, log {results_dir / CAMPAIGN_LOG})"
-                                                        if pid else "not running (hersd-campaign start)"))
+    if pid:
+        process = f"running (pid {pid}, log {results_dir / CAMPAIGN_LOG})"
+    elif busy:
+        process = f"not running; process(es) {', '.join(map(str, sorted(set(busy.values()))))} train runs here"
+    else:
+        process = "not running (hersd-campaign start)"
+    print(f"campaign {campaign} in {results_dir}: {process}")
     print(f"{'stage':<6} {'arm':<32} {'seed':<5} state")
     states = []
     for run in plan:

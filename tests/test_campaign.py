@@ -67,7 +67,7 @@ def test_status_shows_complete_in_progress_training_and_new_runs(plan, tmp_path,
     with run_lock(results / runs[2].relative):  # as a training process holds it
         assert campaign.main(["status", "--results-dir", str(results)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == f"campaign push_paper in {results}: not running (hersd-campaign start)"
+    assert lines[0] == f"campaign push_paper in {results}: not running; process(es) {os.getpid()} train runs here"
     rows = [line.split(maxsplit=3) for line in lines[2:-1]]
     assert [(int(stage), arm, int(seed)) for stage, arm, seed, _ in rows] == [(r.stage, r.arm, r.seed) for r in runs]
     assert [state for *_, state in rows[:4]] == ["complete", "epoch 3 of 200",
