@@ -24,7 +24,7 @@ from omegaconf import DictConfig, open_dict
 
 from hersd.compose import CONFIG_PATH, group_options, register_schema, register_train_schema
 from hersd.config import ConfigError, TrainConfig, to_train_config
-from hersd.resources import available_cores
+from hersd.resources import available_cores, resolve_threads
 from hersd.runstore import RunLockedError, run_dir, run_state
 from sweeps.hydra_private import grid_overrides, job_error
 
@@ -110,8 +110,8 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     to_launch = [job for directory, job in planned.items() if states[directory] != "complete"]
     if not to_launch:
         return []
-    if sweep_threads == "auto":
-        threads = auto_threads(sweeper.config.hydra.launcher, len(to_launch))
+    threads = auto_threads(sweeper.config.hydra.launcher, len(to_launch)) if sweep_threads == "auto" else None
+    if threads is not None:
         to_launch = [with_threads(job, threads) for job in to_launch]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
@@ -121,12 +121,13 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     return [results]
 
 
-def auto_threads(launcher: DictConfig, n_runs: int) -> int:
-    """``threads=auto`` for each run: a SLURM job's cpus_per_task (its allocation, not this
-    machine's cores), else this machine's cores divided among the runs in flight at once."""
+def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
+    """``threads=auto`` for each run of a local launcher: this machine's idle cores divided among
+    the runs in flight at once (:func:`hersd.resources.resolve_threads`). None for SLURM: each job
+    resolves ``auto`` itself from what it was given (``SLURM_CPUS_PER_TASK``, its CPU affinity)."""
     if str(launcher.get("_target_", "")).endswith("SlurmLauncher"):
-        return int(launcher.get("cpus_per_task") or 1)
-    return max(1, available_cores() // concurrent_runs(launcher, n_runs))
+        return None
+    return resolve_threads("auto", concurrent_runs(launcher, n_runs))
 
 
 def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:

@@ -36,3 +36,12 @@ def run_command(module_main: str, *args: str, check: bool = False, timeout: floa
 def tiny(tmp_path) -> list[str]:
     """TINY overrides writing below this test's temporary folder."""
     return [*TINY, "quiet=true", f"results_dir={tmp_path / 'results'}"]
+
+
+@pytest.fixture
+def idle_machine(monkeypatch):
+    """threads=auto sees every core idle (in this process): its thread count no longer depends on
+    what else the machine (e.g. another test worker) is doing."""
+    from hersd import resources
+
+    monkeypatch.setattr(resources, "idle_cores", lambda seconds=0.0: float(resources.available_cores()))

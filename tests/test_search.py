@@ -188,7 +188,7 @@ def test_a_trials_runs_are_those_of_hersd_train_with_the_equivalent_overrides(pa
         assert ours.schedule == theirs.schedule and ours.algo == theirs.algo and ours.threads == "1"
 
 
-def test_run_threads_share_the_cores_unless_given() -> None:
+def test_run_threads_share_the_cores_unless_given(idle_machine) -> None:
     base = compose_train(TINY)
     assert search_plan.run_threads(base, 2) == str(resolve_threads("auto", 2))  # 1 each on 2 cores
     assert search_plan.run_threads(base, 1) == str(available_cores())
@@ -294,7 +294,7 @@ def test_a_run_the_training_layer_refuses_stops_the_search_in_one_line(tmp_path:
     assert waiting.state == TrialState.WAITING
 
 
-def test_pruning_with_seeds_reported_as_one_rising_step(tmp_path: Path, capsys) -> None:
+def test_pruning_with_seeds_reported_as_one_rising_step(tmp_path: Path, capsys, idle_machine) -> None:
     """relabel_rate as the metric makes the objectives exact: beta1=0 keeps eps(k)=1, while
     beta1=1, beta2=-2 drops eps(1) of 3 epochs to 1 - (1/3)**exp(-2) = 0.138, so the
     median pruner (one finished trial, no warm-up) must stop trial 1 at its first step."""
@@ -330,7 +330,7 @@ def test_ci_search_on_two_workers_with_a_journal(tmp_path: Path, capsys) -> None
     for trial in study.get_trials(states=FINISHED):
         (run,) = trial.user_attrs["run_dirs"]
         assert Path(run).is_relative_to(tmp_path / "reach" / "her") and read_run(Path(run) / "run.mcap").epochs.size
-        assert run_meta(run)["threads"] == resolve_threads("auto", 2)  # the cores shared by the two workers
+        assert 1 <= run_meta(run)["threads"] <= max(1, available_cores() // 2)  # the cores shared by the two workers
     out = capsys.readouterr().out
     counts = [len(study.get_trials(states=(state,))) for state in FINISHED]
     assert f"trials: {counts[0]} complete, {counts[1]} pruned, 0 fail" in out
@@ -363,7 +363,7 @@ def test_slurm_workers_run_as_submitit_jobs_each_on_its_whole_allocation(tmp_pat
     study = load(db)
     assert [t.state for t in study.trials] == [TrialState.COMPLETE] * 2, list((tmp_path / "search").rglob("*.err"))
     for trial in study.trials:
-        assert run_meta(trial.user_attrs["run_dirs"][0])["threads"] == available_cores()
+        assert 1 <= run_meta(trial.user_attrs["run_dirs"][0])["threads"] <= available_cores()
 
 
 def _finished_trials(storage: str) -> dict[int, tuple]:

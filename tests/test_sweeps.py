@@ -81,7 +81,7 @@ def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
         log = read_run(log_path)
         assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4]
         assert log.meta["command"].startswith("hersd-sweep ")
-        assert log.meta["threads"] == max(1, available_cores() // min(available_cores(), 4))  # cores shared out
+        assert 1 <= log.meta["threads"] <= max(1, available_cores() // min(available_cores(), 4))  # cores shared out
     assert "4 done" in result.stdout and "0 failed" in result.stdout
     stamps = [p.stat().st_mtime_ns for p in logs]
     again = sweep("+grid=smoke", f"results_dir={tmp_path}")
@@ -120,7 +120,7 @@ def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
     for log_path in logs:
         log = read_run(log_path)
         assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3, 4, 5]  # none lost, none twice
-        assert log.meta["threads"] == available_cores()  # one run at a time: every core
+        assert 1 <= log.meta["threads"] <= available_cores()  # one run at a time: every idle core
     assert all(path.read_bytes() == data for path, data in finished.items())  # finished runs not re-run
     progress = [json.loads(line)["run_dir"] for p in tmp_path.glob(".sweeps/*/progress.jsonl")
                 for line in p.read_text().splitlines()]
@@ -146,15 +146,14 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
     assert read_run(next(tmp_path.rglob("seed1-*/run.mcap"))).meta["threads"] == 1  # an explicit count wins
 
 
-def test_threads_auto_per_launcher():
-    """joblib shares this machine's cores among its runs in flight; a SLURM job gets its own allocation."""
+def test_threads_auto_per_launcher(idle_machine):
+    """joblib shares this machine's cores among its runs in flight; a SLURM job resolves its own."""
     from omegaconf import OmegaConf
 
     from sweeps.launch import auto_threads
 
     slurm = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
     joblib = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
-    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": 4}), n_runs=10) == 4
-    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": None}), n_runs=10) == 1
+    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": 4}), n_runs=10) is None
     assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": 1}), n_runs=10) == available_cores()
     assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": -1}), n_runs=1) == available_cores()

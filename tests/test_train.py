@@ -266,7 +266,7 @@ def test_device_cpu_and_auto_give_identical_metrics_on_a_cpu_machine(tmp_path):
     assert read_run(on_auto).meta["device"] == "cpu"
 
 
-def test_threads_auto_gives_a_lone_run_every_core_and_same_threads_same_metrics(tmp_path):
+def test_threads_auto_gives_a_lone_run_every_core_and_same_threads_same_metrics(tmp_path, idle_machine):
     args = [*TINY_RUN, "quiet=true", "epochs=1", "threads=auto"]
     first = train(compose([*args, f"results_dir={tmp_path / 'a'}"]))
     second = train(compose([*args, f"results_dir={tmp_path / 'b'}"]))
