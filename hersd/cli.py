@@ -75,13 +75,14 @@ def usage() -> str:
     ])
 
 
-def _fail(message: str) -> None:
+def _fail(message: str, code: int = 2) -> None:
     print(f"hersd-train: error: {message}", file=sys.stderr)
-    sys.exit(2)
+    sys.exit(code)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2."""
+    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
+    losses turn NaN or infinite with one line and exit code 1."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
     except (HydraException, OmegaConfBaseException) as err:
         _fail(explain_config_error(err))
     from hersd.resources import resolve_device  # torch and MuJoCo load only once the input is valid
-    from hersd.train import RunStateError, train
+    from hersd.train import NonFiniteLossError, RunStateError, train
 
     try:
         resolve_device(cfg.device)
@@ -108,6 +109,8 @@ def main(argv: list[str] | None = None) -> None:
         _fail(f"{err}; wait for it to finish")
     except RunStateError as err:
         _fail(str(err))
+    except NonFiniteLossError as err:
+        _fail(str(err), code=1)
     print(log_path)
 
 

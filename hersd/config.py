@@ -24,6 +24,24 @@ GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
 LEARNERS = ("ddpg", "td3", "sac")
 
+# Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
+# The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
+# significand, 1 part in 1.7e7) then still resolves one reward of lambda, and float32(gamma) < 1.
+HORIZON_LIMIT = 1e6
+# Weights and scales set by the user (lambda_r, lambda_h, action_l2, SAC's alpha, noise stds, input
+# clips) are at most SCALE_LIMIT: Q targets then stay within q_min = -max(lambda) * H >= -1e12, so a
+# squared TD error (<= 4e24), a batch's sum of them (batches < 1e9 transitions fit any memory) and
+# Adam's squared gradients stay below float32's 3.4e38. Weights and the normaliser's std floor are at
+# least 1/SCALE_LIMIT: far smaller, gradients sink below Adam's eps (1e-8) and learning stalls.
+SCALE_LIMIT = 1e6
+# Adam moves every weight by about lr per step; initial weights lie within +-1/sqrt(fan_in) <= 1, so a
+# rate above 1 replaces the network at each update (and its float32 weights soon overflow).
+LR_LIMIT = 1.0
+# rank ** (1/temperature) stays below float64's 1.8e308 summed over n episodes while
+# (1 + 1/temperature) * ln(n) < 709.8: with temperature >= 0.05, for n < 4e14 episodes (any memory).
+MEP_MIN_TEMPERATURE = 0.05
+MAX_THREADS = 1024  # threads=N at most: torch takes a C int, and no machine here has more cores
+
 
 class ConfigError(ValueError):
     """A configuration value is out of range; the message is one line for the user."""
@@ -36,6 +54,13 @@ def _check(condition: bool, message: str) -> None:
 
 def _is_finite(value: float) -> bool:
     return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def _check_number(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
+    """ConfigError (one line) unless ``value`` is a finite number in [low, high] ((low, high] if low_open)."""
+    above_low = _is_finite(value) and (value > low if low_open else value >= low)
+    _check(above_low and value <= high,
+           f"{name} must be a number in {'(' if low_open else '['}{low:g}, {high:g}], got {value}")
 
 
 @dataclass
@@ -86,8 +111,9 @@ class MEPConfig:
     max_iter: int = 100  # EM iterations per fit at most (fits after the first start from the last one)
 
     def __post_init__(self) -> None:
-        _check(_is_finite(self.temperature) and self.temperature > 0,
-               f"algo.mep.temperature must be a positive number, got {self.temperature}")
+        _check(_is_finite(self.temperature) and self.temperature >= MEP_MIN_TEMPERATURE,
+               f"algo.mep.temperature must be a number >= {MEP_MIN_TEMPERATURE:g} (rank ** (1 / temperature) "
+               f"overflows below), got {self.temperature}")
         _check(self.n_components >= 1, f"algo.mep.n_components must be >= 1, got {self.n_components}")
         _check(self.fit_subsample >= self.n_components,
                f"algo.mep.fit_subsample must be >= algo.mep.n_components, got {self.fit_subsample}")
@@ -106,8 +132,7 @@ class AlgoConfig:
         _check(self.goal_strategy in GOAL_STRATEGIES,
                f"algo.goal_strategy={self.goal_strategy!r} is unknown; choose one of: {', '.join(GOAL_STRATEGIES)}")
         for name in ("lambda_r", "lambda_h"):
-            value = getattr(self, name)
-            _check(_is_finite(value) and value > 0, f"algo.{name} must be a positive number, got {value}")
+            _check_number(f"algo.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
 
 
 @dataclass
@@ -179,17 +204,20 @@ class DDPGConfig:
         for name in ("hidden_layers", "hidden_units", "buffer_size", "batch_size", "rollouts_per_cycle",
                      "batches_per_cycle", "test_rollouts"):
             _check(getattr(self, name) >= 1, f"ddpg.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("actor_lr", "critic_lr", "clip_obs", "clip_norm", "norm_eps"):
-            value = getattr(self, name)
-            _check(_is_finite(value) and value > 0, f"ddpg.{name} must be a positive number, got {value}")
-        for name in ("polyak", "random_eps", "noise_eps", "action_l2"):
-            value = getattr(self, name)
-            _check(_is_finite(value) and value >= 0, f"ddpg.{name} must be a number >= 0, got {value}")
-        _check(self.polyak <= 1.0 and self.random_eps <= 1.0,
-               "ddpg.polyak and ddpg.random_eps must be <= 1")
+        _check(self.batch_size <= self.buffer_size,
+               f"ddpg.batch_size must be in [1, ddpg.buffer_size={self.buffer_size}], got {self.batch_size}")
+        for name in ("actor_lr", "critic_lr"):
+            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, LR_LIMIT, low_open=True)
+        for name in ("clip_obs", "clip_norm", "norm_eps"):
+            _check_number(f"ddpg.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
+        for name in ("polyak", "random_eps"):
+            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, 1.0)
+        for name in ("noise_eps", "action_l2"):
+            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, SCALE_LIMIT)
         if self.gamma is not None:
-            _check(_is_finite(self.gamma) and 0.0 < self.gamma < 1.0,
-                   f"ddpg.gamma must be in (0, 1) or null, got {self.gamma}")
+            _check(_is_finite(self.gamma) and 0.0 < self.gamma <= 1.0 - 1.0 / HORIZON_LIMIT,
+                   f"ddpg.gamma must be in (0, {1.0 - 1.0 / HORIZON_LIMIT:.6f}] (1/(1-gamma) <= {HORIZON_LIMIT:g}) "
+                   f"or null, got {self.gamma}")
 
 
 @dataclass
@@ -201,8 +229,7 @@ class TD3Config:
 
     def __post_init__(self) -> None:
         for name in ("policy_noise", "noise_clip"):
-            value = getattr(self, name)
-            _check(_is_finite(value) and value >= 0, f"learner.td3.{name} must be a number >= 0, got {value}")
+            _check_number(f"learner.td3.{name}", getattr(self, name), 0.0, SCALE_LIMIT)
         _check(self.policy_delay >= 1, f"learner.td3.policy_delay must be >= 1, got {self.policy_delay}")
 
 
@@ -214,12 +241,10 @@ class SACConfig:
     target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
 
     def __post_init__(self) -> None:
-        for name in ("init_alpha", "alpha_lr"):
-            value = getattr(self, name)
-            _check(_is_finite(value) and value > 0, f"learner.sac.{name} must be a positive number, got {value}")
+        _check_number("learner.sac.init_alpha", self.init_alpha, 1 / SCALE_LIMIT, SCALE_LIMIT)
+        _check_number("learner.sac.alpha_lr", self.alpha_lr, 0.0, LR_LIMIT, low_open=True)
         if self.target_entropy is not None:
-            _check(_is_finite(self.target_entropy),
-                   f"learner.sac.target_entropy must be a finite number or null, got {self.target_entropy}")
+            _check_number("learner.sac.target_entropy", self.target_entropy, -SCALE_LIMIT, SCALE_LIMIT)
 
 
 @dataclass
@@ -249,7 +274,7 @@ class TrainConfig:
     keep_checkpoint: bool = False  # keep the checkpoint after the run completes (it can be large)
     quiet: bool = False  # no per-epoch progress lines (sweeps)
     # Intra-op threads of the run's updates: auto = this machine's cores / runs sharing it (a lone
-    # run: all cores; sweeps and searches divide the cores among their runs); or a number >= 1.
+    # run: all cores; sweeps and searches divide the cores among their runs); or a number in [1, 1024].
     # Thread counts can change floating-point sums: logged, not part of the run's identity.
     threads: str = "auto"
     device: str = "auto"  # where networks and updates run: auto (cuda if available, else cpu) | cpu | cuda[:N]
@@ -258,8 +283,8 @@ class TrainConfig:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
         _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
         _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
-        _check(self.threads == "auto" or (self.threads.isdigit() and int(self.threads) >= 1),
-               f"threads must be auto or a whole number >= 1, got {self.threads!r}")
+        _check(self.threads == "auto" or (self.threads.isdigit() and 1 <= int(self.threads) <= MAX_THREADS),
+               f"threads must be auto or a whole number in [1, {MAX_THREADS}], got {self.threads!r}")
         _check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (
             self.device.startswith("cuda:") and self.device[5:].isdigit())),
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")

@@ -38,14 +38,15 @@ class RunState:
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)  # sampling/exploration, torch, train envs, test envs
         self.rng = np.random.default_rng(seeds[0])
         torch.manual_seed(int(seeds[1].generate_state(1)[0]))
-        self.train_envs = [make_env(cfg.task) for _ in range(d.rollouts_per_cycle)]
+        first_env = make_env(cfg.task)  # the task's sizes: the memory check runs before the other envs exist
+        self.spec = spec = env_spec(first_env)
+        check_memory(cfg, spec, env_bytes(first_env))
+        self.train_envs = [first_env] + [make_env(cfg.task) for _ in range(d.rollouts_per_cycle - 1)]
         self.test_envs = [make_env(cfg.task) for _ in range(d.rollouts_per_cycle)]
         for envs, seq in ((self.train_envs, seeds[2]), (self.test_envs, seeds[3])):
             for env, env_seed in zip(envs, seq.generate_state(len(envs))):
                 env.reset(seed=int(env_seed))
-        self.spec = spec = env_spec(self.train_envs[0])
         self._reward = reward_function(self.train_envs[0], cfg.task.env_id)
-        check_memory(cfg, spec)
         self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
         self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
         self.agent = make_agent(cfg, spec, self.gamma, self.q_min, device)
@@ -115,24 +116,55 @@ def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_min: float, devi
     return DDPG(cfg.ddpg, *sizes)
 
 
-def memory_needed(cfg: TrainConfig, spec: EnvSpec) -> int:
-    """Bytes of a run's replay buffer and networks (online, target, gradients, two Adam moments)."""
+def env_bytes(env: Any) -> int:
+    """Bytes of one MuJoCo env's model, data and arena (0 for an env without them)."""
+    model, data = getattr(env, "model", None), getattr(env, "data", None)
+    return sum(int(getattr(obj, name, 0)) for obj, name in ((model, "nbuffer"), (data, "nbuffer"), (data, "narena")))
+
+
+def memory_parts(cfg: TrainConfig, spec: EnvSpec, one_env_bytes: int) -> dict[str, int]:
+    """Bytes a run allocates, by the part that allocates them (the names the memory check reports)."""
     d, horizon = cfg.ddpg, spec.horizon
-    episode_floats = (horizon + 1) * (spec.obs_dim + spec.goal_dim) + horizon * (spec.goal_dim + spec.action_dim)
-    buffer = max(1, d.buffer_size // horizon) * episode_floats * 4
     in_dim, units = spec.obs_dim + spec.goal_dim, d.hidden_units
+    episode_floats = (horizon + 1) * (spec.obs_dim + spec.goal_dim) + horizon * (spec.goal_dim + spec.action_dim)
+    episodes = max(1, d.buffer_size // horizon)
     hidden = (d.hidden_layers - 1) * (units * units + units)
-    actor = in_dim * units + units + hidden + units * spec.action_dim + spec.action_dim
+    outputs = spec.action_dim * (2 if cfg.learner.name == "sac" else 1)  # SAC: a mean and a log std per action
+    actor = in_dim * units + units + hidden + units * outputs + outputs
     critic = (in_dim + spec.action_dim) * units + units + hidden + units + 1
-    return buffer + (actor + critic) * 4 * 5
+    critics = 1 if cfg.learner.name == "ddpg" else 2  # TD3 and SAC: twin critics
+    # One update: the sampled rows on the host and the device (copies, clips, concatenations), and each
+    # network pass's saved activations and their gradients (at most 8 passes: SAC's actor twice, four
+    # critic passes, two target critics).
+    row_bytes = 16 * (spec.obs_dim + spec.goal_dim + spec.action_dim + 2) + 24 + 2 * 8 * 4 * d.hidden_layers * units
+    parts = {"replay buffer": episodes * episode_floats * 4,
+             "networks": (actor + critics * critic) * 4 * 5,  # online, target, gradient, two Adam moments
+             "minibatch": d.batch_size * row_bytes,
+             "envs": 2 * d.rollouts_per_cycle * one_env_bytes}
+    if cfg.algo.mep.enabled:
+        mep, features = cfg.algo.mep, (horizon + 1) * spec.goal_dim
+        rows = min(mep.fit_subsample, episodes)
+        # the mixture's covariances, precisions and their Cholesky factors; the fit's rows and responsibilities
+        parts["MEP density"] = 8 * (3 * mep.n_components * features ** 2 + rows * (features + 2 * mep.n_components))
+    return parts
 
 
-def check_memory(cfg: TrainConfig, spec: EnvSpec) -> None:
-    """ConfigError (one line) when the run cannot fit in this machine's available memory."""
-    needed, available = memory_needed(cfg, spec), available_memory_bytes()
+# The settings that size each part of memory_parts, named when the run does not fit.
+MEMORY_SETTINGS = {"replay buffer": "ddpg.buffer_size", "networks": "ddpg.hidden_units or ddpg.hidden_layers",
+                   "minibatch": "ddpg.batch_size, ddpg.hidden_units or ddpg.hidden_layers",
+                   "envs": "ddpg.rollouts_per_cycle",
+                   "MEP density": "algo.mep.n_components or algo.mep.fit_subsample"}
+
+
+def check_memory(cfg: TrainConfig, spec: EnvSpec, one_env_bytes: int) -> None:
+    """ConfigError (one line) when the run cannot fit in this machine's available memory; it names the
+    settings of the largest part."""
+    parts, available = memory_parts(cfg, spec, one_env_bytes), available_memory_bytes()
+    needed = sum(parts.values())
     if available is not None and needed > available:
-        raise ConfigError(f"this run needs {needed / 2**30:.1f} GiB for its replay buffer and networks but "
-                          f"{available / 2**30:.1f} GiB are available; lower ddpg.buffer_size or ddpg.hidden_units")
+        shown = ", ".join(f"{name} {size / 2**30:.1f}" for name, size in parts.items())
+        raise ConfigError(f"this run needs {needed / 2**30:.1f} GiB ({shown}) but {available / 2**30:.1f} GiB are "
+                          f"available; lower {MEMORY_SETTINGS[max(parts, key=parts.get)]}")
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:

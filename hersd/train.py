@@ -9,6 +9,7 @@ at the epoch's end. The command line is in :mod:`hersd.cli`.
 
 from __future__ import annotations
 
+import math
 import platform
 import subprocess
 import time
@@ -35,6 +36,26 @@ EpochCallback = Callable[[dict], None]
 
 class RunStateError(RuntimeError):
     """A run directory holds a checkpoint or log that cannot be read; the message says what to do."""
+
+
+class NonFiniteLossError(RuntimeError):
+    """An epoch's losses or Q values are NaN or infinite; its record is not logged (one-line message)."""
+
+
+# The settings that scale an update's losses, named when they turn non-finite (SAC has no action_l2 term).
+LOSS_SETTINGS = "algo.lambda_r, algo.lambda_h, ddpg.gamma, ddpg.actor_lr, ddpg.critic_lr"
+LEARNER_LOSS_SETTINGS = {"ddpg": "ddpg.action_l2", "td3": "ddpg.action_l2",
+                         "sac": "learner.sac.init_alpha, learner.sac.alpha_lr, learner.sac.target_entropy"}
+
+
+def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
+    """NonFiniteLossError naming the epoch, the values and the settings that scale them, if any is NaN or inf."""
+    names = ("critic_loss", "actor_loss", "q_mean", "q_std", "alpha", "policy_entropy")
+    bad = [f"{name}={record[name]}" for name in names if record[name] is not None and not math.isfinite(record[name])]
+    if bad:
+        raise NonFiniteLossError(
+            f"epoch {record['epoch']}: {', '.join(bad)}; the run stops at its last logged epoch and checkpoint; "
+            f"lower {LOSS_SETTINGS}, {LEARNER_LOSS_SETTINGS[cfg.learner.name]}")
 
 
 # --------------------------------------------------------------------------- the steps of an epoch
@@ -228,6 +249,7 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
     try:
         for epoch in range(state.epochs_done + 1, cfg.epochs + 1):
             record = run_epoch(state, epoch)
+            check_finite(cfg, record)
             log.write_epoch(record)
             _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  eps {record['relabel_rate']:.3f}  test "
                       f"{record['test_success']:.2f}  train {record['train_success']:.2f}  Q {record['q_mean']:7.2f}  "
