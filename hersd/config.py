@@ -1,8 +1,8 @@
 """Typed configuration of one training run.
 
 The YAML files under ``conf/`` are merged onto these dataclasses (registered in Hydra's
-ConfigStore by :func:`register_schemas`), so a wrong type or an unknown key fails at
-composition. Range checks live in ``__post_init__`` and run when
+ConfigStore by :func:`hersd.compose.register_train_schema`), so a wrong type or an unknown
+key fails at composition. Range checks live in ``__post_init__`` and run when
 :func:`to_train_config` turns the composed config into objects; they raise
 :class:`ConfigError` whose message is one line naming the field and the allowed values.
 
@@ -290,13 +290,6 @@ class TrainConfig:
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
         self.task.resolve()
         self.schedule.solve_beta1(self.epochs)
-
-
-def register_schemas() -> None:
-    """Register the schema so ``conf/train.yaml`` can name it first in its defaults."""
-    from hydra.core.config_store import ConfigStore
-
-    ConfigStore.instance().store(name="train_schema", node=TrainConfig)
 
 
 def to_train_config(cfg: DictConfig) -> TrainConfig:

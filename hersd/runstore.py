@@ -38,7 +38,6 @@ NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_check
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
 HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0}
-RUN_STATES = ("complete", "resumable", "new")
 
 
 class RunLockedError(RuntimeError):
