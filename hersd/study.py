@@ -37,7 +37,9 @@ STORAGE_SUFFIXES = SQLITE_SUFFIXES + JOURNAL_SUFFIXES  # the files in <folder>/s
 SEARCH_FOLDER = "search"  # <results_dir>/search/: default storages (<study>.db), found by the report
 SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing
 CONNECT_TIMEOUT_SECONDS = 10  # how long to wait for a PostgreSQL server
-DRIVER_HINTS = {"postgresql": 'pip install "hersd[cluster]" (the psycopg2 driver)'}  # backend -> how to get its driver
+# backend -> how to get its driver (the extra's psycopg2 serves a bare postgresql:// when psycopg is missing)
+DRIVER_HINTS = {"postgresql": 'pip install "hersd[cluster]" (psycopg2, which postgresql:// and '
+                              'postgresql+psycopg2:// URLs then use)'}
 SCHEMES = "use sqlite:///<file>, postgresql://..., another SQLAlchemy URL, or journal:<file>"
 MESSAGE_LIMIT = 200  # characters of a database's own error message kept in ours
 
