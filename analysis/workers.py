@@ -9,18 +9,11 @@ job, or no ``fork`` on the platform, the jobs run in this process instead, with 
 from __future__ import annotations
 
 import multiprocessing
-import os
 from typing import Any, Callable, Sequence
 
+from hersd.resources import available_cores
+
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # what the forked children inherit
-
-
-def available_cores() -> int:
-    """Cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def _run_job(index: int) -> Any:
