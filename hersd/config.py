@@ -273,6 +273,9 @@ class TrainConfig:
     checkpoint_every: int = 1  # save an exact-resume checkpoint every N epochs (0: never)
     keep_checkpoint: bool = False  # keep the checkpoint after the run completes (it can be large)
     quiet: bool = False  # no per-epoch progress lines (sweeps)
+    # Animate the deterministic policy (2 test episodes, <run dir>/policy/epoch_<k>.gif, hersd/render.py)
+    # every N epochs and at the last one (0: never); a few seconds each, not part of the run's identity.
+    render_every: int = 50
     # Intra-op threads of the run's updates: auto = this machine's cores / runs sharing it (a lone
     # run: all cores; sweeps and searches divide the cores among their runs); or a number in [1, 1024].
     # Thread counts can change floating-point sums: logged, not part of the run's identity.
@@ -283,6 +286,7 @@ class TrainConfig:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
         _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
         _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        _check(self.render_every >= 0, f"render_every must be >= 0 (0: never), got {self.render_every}")
         _check(self.threads == "auto" or (self.threads.isdigit() and 1 <= int(self.threads) <= MAX_THREADS),
                f"threads must be auto or a whole number in [1, {MAX_THREADS}], got {self.threads!r}")
         _check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (

@@ -39,11 +39,12 @@ class EnvSpec(NamedTuple):
     distance_threshold: float
 
 
-def make_env(task: TaskConfig) -> Any:
-    """One unwrapped goal env; ``task.distance_threshold`` (if set) replaces the success radius.
+def make_env(task: TaskConfig, **make_kwargs: Any) -> Any:
+    """One unwrapped goal env; ``task.distance_threshold`` (if set) replaces the success radius;
+    ``make_kwargs`` go to ``gym.make`` (e.g. ``render_mode="rgb_array"``, :mod:`hersd.render`).
     An unknown env id or an env that is not goal-conditioned raises ConfigError (one line)."""
     try:
-        env = gym.make(task.env_id).unwrapped
+        env = gym.make(task.env_id, **make_kwargs).unwrapped
     except gym.error.Error as err:
         raise ConfigError(f"task.env_id={task.env_id!r}: {' '.join(str(err).split())[:200]}; goal-conditioned envs "
                           f"include: {', '.join(goal_env_ids()[:12])}, ...") from None

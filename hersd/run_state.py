@@ -47,8 +47,7 @@ class RunState:
             for env, env_seed in zip(envs, seq.generate_state(len(envs))):
                 env.reset(seed=int(env_seed))
         self._reward = reward_function(self.train_envs[0], cfg.task.env_id)
-        self.gamma = d.gamma if d.gamma is not None else 1.0 - 1.0 / spec.horizon
-        self.q_min = -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - self.gamma)
+        self.gamma, self.q_min = discounting(cfg, spec.horizon)
         self.agent = make_agent(cfg, spec, self.gamma, self.q_min, device)
         self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
         # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
@@ -100,6 +99,12 @@ class RunState:
     def close(self) -> None:
         for env in self.train_envs + self.test_envs:
             env.close()
+
+
+def discounting(cfg: TrainConfig, horizon: int) -> tuple[float, float]:
+    """(gamma, q_min): ``ddpg.gamma`` (null: 1 - 1/T) and target Q's lower clip -max(lambda_r, lambda_h) / (1 - gamma)."""
+    gamma = cfg.ddpg.gamma if cfg.ddpg.gamma is not None else 1.0 - 1.0 / horizon
+    return gamma, -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - gamma)
 
 
 def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_min: float, device: torch.device) -> DDPG:

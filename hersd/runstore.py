@@ -6,6 +6,7 @@ the search. Light (no torch): a sweep plans hundreds of runs with it.
 - ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
 - ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
 - ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
+- ``policy/epoch_<k>.gif``  an animation of the policy's test episodes after epoch k (:mod:`hersd.render`);
 - ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
 
 The hash covers every config field that changes what the run computes
@@ -33,8 +34,10 @@ from hersd.runlog import LOG_NAME, RunLogError, read_run
 
 CHECKPOINT_NAME = "checkpoint.pt"
 LOCK_NAME = "run.lock"
+POLICY_DIR = "policy"  # the run's policy animations: policy/epoch_<k>.gif
 # Fields that change where, how loudly or how fast a run is written, not what it computes.
-NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device")
+NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device",
+              "render_every")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
 HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0}
@@ -89,6 +92,21 @@ def run_dir(cfg: TrainConfig) -> Path:
         return Path(cfg.run_dir)
     algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{cfg.learner.name}-{cfg.algo.name}"
     return Path(cfg.results_dir) / cfg.task.name / algo / schedule_tag(cfg.schedule) / f"seed{cfg.seed}-{config_hash(cfg)}"
+
+
+def policy_animation(directory: Path, epoch: int) -> Path:
+    """Where the animation of the policy after ``epoch`` lives in a run directory."""
+    return directory / POLICY_DIR / f"epoch_{epoch}.gif"
+
+
+def policy_animations(directory: Path) -> dict[int, Path]:
+    """The run directory's policy animations: epoch -> path, in epoch order (none: empty)."""
+    found = {}
+    for path in (directory / POLICY_DIR).glob("epoch_*.gif"):
+        epoch = path.stem.removeprefix("epoch_")
+        if epoch.isdigit():
+            found[int(epoch)] = path
+    return dict(sorted(found.items()))
 
 
 def run_state(directory: Path) -> str:

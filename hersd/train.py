@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import platform
 import subprocess
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import asdict
@@ -25,10 +26,12 @@ import hersd
 from hersd.config import TrainConfig
 from hersd.ddpg import DDPG, UpdateStats
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
+from hersd.render import RenderError, render_policy, renders_at
 from hersd.resources import machine_info, resolve_device, resolve_threads
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_run
-from hersd.runstore import CHECKPOINT_NAME, config_hash, keep_aside, remove_if_unused, run_dir, run_lock
+from hersd.runstore import (CHECKPOINT_NAME, config_hash, keep_aside, policy_animation, remove_if_unused, run_dir,
+                            run_lock)
 from hersd.schedules import relabel_rate
 
 EpochCallback = Callable[[dict], None]
@@ -256,6 +259,8 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
                       f"{record['epoch_seconds']:.1f}s")
             if cfg.checkpoint_every and (epoch % cfg.checkpoint_every == 0 or epoch == cfg.epochs):
                 save_checkpoint(checkpoint_path, state.state_dict())
+            if renders_at(cfg.render_every, epoch, cfg.epochs):
+                animate(cfg, state, epoch, checkpoint_path.parent)
             if on_epoch is not None:
                 on_epoch(record)
         log.finish(cfg.epochs)
@@ -263,6 +268,19 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
             checkpoint_path.unlink()
     finally:
         log.close()
+
+
+def animate(cfg: TrainConfig, state: RunState, epoch: int, directory: Path) -> None:
+    """Write the policy's animation after ``epoch`` (hersd.render); a failure is one warning line on stderr,
+    never an error: training goes on."""
+    try:
+        animation = render_policy(state.agent, cfg, epoch, policy_animation(directory, epoch))
+    except Exception as err:  # noqa: BLE001  (a missing OpenGL, a full disk: the run matters more)
+        reason = str(err) if isinstance(err, RenderError) else f"{type(err).__name__}: {str(err).strip()[:200]}"
+        print(f"warning: {directory}: epoch {epoch}: no policy animation: {' '.join(reason.split())}",
+              file=sys.stderr, flush=True)
+        return
+    _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  policy animation {animation.path} ({animation.seconds:.1f} s)")
 
 
 # --------------------------------------------------------------------------- resume

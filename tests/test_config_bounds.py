@@ -68,6 +68,7 @@ TABLE: dict[str, tuple[list, list]] = {
     "learner.sac.init_alpha": WEIGHT, "learner.sac.alpha_lr": RATE,
     "learner.sac.target_entropy": ([-1.1e6, 1.1e6, -HUGE, HUGE, INF, -INF, NAN], [-1e6, 0.0, 1e6, None]),
     "seed": ([-1], [0, BIG_INT]), "epochs": COUNT, "checkpoint_every": ([-1], [0, BIG_INT]),
+    "render_every": ([-1], [0, BIG_INT]),
     "threads": (["0", "1025", "-1", "1e3"], ["auto", "1", "1024"]),
 }
 CASES = [(field, value, valid) for field, (bad, good) in TABLE.items()

@@ -15,7 +15,8 @@ from hersd.runlog import read_run
 from hersd.runstore import run_lock
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
-TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64"]
+TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
+        "render_every=0"]
 
 
 def sweep(*args: str, check: bool = True) -> subprocess.CompletedProcess:

@@ -1,0 +1,123 @@
+"""Policy animations (hersd/render.py): rendering changes nothing a run computes, the GIF shows the
+scene, hersd-render draws a checkpoint's epoch as training did, and every failure is one line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import TINY, metrics
+from PIL import Image, ImageSequence
+
+import hersd.render
+import hersd.train
+from hersd.compose import compose_train
+from hersd.render import RenderError, headless_backend, main, renders_at
+from hersd.runstore import CHECKPOINT_NAME, policy_animation, policy_animations
+from hersd.train import train
+
+RUN = [*TINY[:-1], "epochs=2", "seed=5", "quiet=true", "threads=1"]  # TINY less its render_every=0
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """The same tiny FetchReach run rendering after every epoch (checkpoint kept) and never -> their logs."""
+    root = tmp_path_factory.mktemp("render")
+    return {every: train(compose_train([*RUN, f"render_every={every}", "keep_checkpoint=true",
+                                        f"results_dir={root / f'every{every}'}"]))
+            for every in ("1", "0")}
+
+
+def gif_frames(path: Path) -> list[np.ndarray]:
+    """Every frame of a GIF as (H, W, 3) uint8."""
+    with Image.open(path) as image:
+        return [np.array(frame.convert("RGB")) for frame in ImageSequence.Iterator(image)]
+
+
+def test_rendering_changes_no_metric_and_no_run_folder(runs):
+    rendered, plain = runs["1"], runs["0"]
+    pd.testing.assert_frame_equal(metrics(rendered), metrics(plain))
+    assert rendered.relative_to(rendered.parents[4]) == plain.relative_to(plain.parents[4])  # <task>/.../seedN-<hash>
+    assert list(policy_animations(rendered.parent)) == [1, 2]
+    assert policy_animations(plain.parent) == {}
+
+
+def test_the_animation_shows_the_scene_moving(runs):
+    path = policy_animation(runs["1"].parent, 2)
+    frames = gif_frames(path)
+    assert frames[0].shape == (hersd.render.HEIGHT, hersd.render.WIDTH, 3)
+    assert len(frames) == 2 * (50 // hersd.render.FRAME_STEP + 1)  # 2 episodes: the start and every 2nd step
+    assert all(frame.std() > 20 for frame in frames[::10])  # not blank: table, robot, floor
+    assert np.abs(frames[0].astype(int) - frames[len(frames) // 4]).mean() > 0.5  # the arm moved
+    assert 20_000 < path.stat().st_size < 400_000
+
+
+def test_hersd_render_draws_the_checkpoints_epoch_as_training_did(runs, tmp_path, capsys):
+    directory = runs["1"].parent
+    out = tmp_path / "again.gif"
+    assert main([str(directory), "--epoch", "2", "--out", str(out)]) == 0
+    assert out.read_bytes() == policy_animation(directory, 2).read_bytes()
+    assert f"{out} (epoch 2, 52 frames" in capsys.readouterr().out
+
+
+def exit_code(args: list[str]) -> int:
+    """hersd-render's exit status for ``args`` (argparse's errors exit through SystemExit)."""
+    try:
+        return main(args)
+    except SystemExit as exited:
+        return exited.code
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--epoch", "1"], "only the checkpoint's epoch, 2, can be rendered (asked for epoch 1)"),
+    (["--episodes", "0"], "--episodes must be at least 1, got 0"),
+])
+def test_hersd_render_refuses_another_epoch_in_one_line(runs, capsys, args, expected):
+    assert exit_code([str(runs["1"].parent), *args]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and err.count("\n") == 1, err
+
+
+def test_hersd_render_needs_a_run_with_a_checkpoint(tmp_path, capsys):
+    assert exit_code([str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"hersd-render: error: {tmp_path}: not a run directory (no run.mcap)\n"
+    log = train(compose_train([*RUN, "epochs=1", "render_every=0", f"results_dir={tmp_path}"]))
+    assert not (log.parent / CHECKPOINT_NAME).exists()
+    assert exit_code([str(log.parent)]) == 2
+    err = capsys.readouterr().err
+    assert f"{log.parent}: no checkpoint.pt to render from" in err and err.count("\n") == 1
+
+
+def test_a_failed_render_is_a_warning_and_the_run_goes_on(tmp_path, monkeypatch, capsys):
+    def fail(*args, **kwargs):
+        raise RenderError("no headless OpenGL for MuJoCo (EGL and OSMesa both failed); apt-get install libosmesa6")
+
+    monkeypatch.setattr(hersd.train, "render_policy", fail)
+    log = train(compose_train([*RUN, "epochs=1", "render_every=1", f"results_dir={tmp_path}"]))
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and "epoch 1: no policy animation: no headless OpenGL" in err
+    assert metrics(log)["epoch"].tolist() == [1] and policy_animations(log.parent) == {}
+
+
+def test_headless_rendering_picks_egl_then_osmesa_else_names_the_packages(monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", "unset below")
+    monkeypatch.delenv("MUJOCO_GL")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    for works, expected in ((lambda backend: True, "egl"), (lambda backend: backend == "osmesa", "osmesa")):
+        hersd.render._first_working_backend.cache_clear()
+        monkeypatch.setattr(hersd.render, "_backend_works", works)
+        assert headless_backend() == expected == hersd.render.os.environ.pop("MUJOCO_GL")
+    hersd.render._first_working_backend.cache_clear()
+    monkeypatch.setattr(hersd.render, "_backend_works", lambda backend: False)
+    with pytest.raises(RenderError, match="apt-get install libegl1 libgl1-mesa-dri .EGL. or libosmesa6"):
+        headless_backend()
+    hersd.render._first_working_backend.cache_clear()
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")  # the user's choice is kept
+    assert headless_backend() == "osmesa"
+
+
+def test_renders_at_every_nth_epoch_and_the_last():
+    assert [k for k in range(1, 121) if renders_at(50, k, 120)] == [50, 100, 120]
+    assert [k for k in range(1, 4) if renders_at(0, k, 3)] == []
