@@ -38,7 +38,8 @@ PAPER_COMPOSITION_TASK = "push"
 PAPER_COMPOSITION_EPOCH = 150
 PAPER_COMPOSITION = {"share_real_success": 0.053, "share_hindsight": 0.80, "share_real_failure": 0.147}
 SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "auc",
-                   *(f"epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
+                   *(f"epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS),
+                   *(f"raw_epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
                    f"p_improve_{BASELINE}"]
 
 
@@ -58,9 +59,11 @@ def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
 
 
 def median_curves(curves: pd.DataFrame) -> pd.DataFrame:
-    """Per (task, config, epoch): median, low (min), high (max) of ``smoothed`` over seeds, n_seeds."""
-    grouped = curves.groupby([*GROUP, "epoch"], observed=True)["smoothed"]
-    summary = grouped.agg(median="median", low="min", high="max", n_seeds="count")
+    """Per (task, config, epoch): median, low (min), high (max) of ``smoothed`` over seeds, n_seeds,
+    and raw_median (the median of the raw, unsmoothed success)."""
+    grouped = curves.groupby([*GROUP, "epoch"], observed=True)
+    summary = grouped["smoothed"].agg(median="median", low="min", high="max", n_seeds="count")
+    summary["raw_median"] = grouped["success"].median()
     return summary.reset_index()
 
 
@@ -153,7 +156,8 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
     Columns: task, config, seeds (complete runs), in_progress (its runs left out, not
     complete), final_median (median over seeds of final success), auc (mean over epochs 1..K
     of the median curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve
-    reaches it, NaN if never), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap
+    reaches it, NaN if never), raw_epochs_to_0.5 / raw_epochs_to_0.9 (the same for the median
+    of the raw, unsmoothed success), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap
     interval), p_improve_HER (probability of improvement on the seeds of its
     :func:`her_baselines` HER configuration; NaN without one).
     """
@@ -169,16 +173,17 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
             "final_median": float(np.median(final)), "auc": float(median["median"].mean()),
         }
         for threshold in SUCCESS_THRESHOLDS:
-            row[f"epochs_to_{threshold:g}"] = first_epoch_reaching(median["epoch"].to_numpy(),
-                                                                  median["median"].to_numpy(), threshold)
+            for prefix, column in (("", "median"), ("raw_", "raw_median")):
+                row[f"{prefix}epochs_to_{threshold:g}"] = first_epoch_reaching(
+                    median["epoch"].to_numpy(), median[column].to_numpy(), threshold)
         row.update(iqm=interquartile_mean(final), iqm_low=low, iqm_high=high)
         baseline = baselines.get((task, config))
         row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
                                         if (task, baseline) in finals else float("nan"))
         rows.append(row)
     table = pd.DataFrame.from_records(rows, columns=SUMMARY_COLUMNS)
-    for threshold in SUCCESS_THRESHOLDS:
-        table[f"epochs_to_{threshold:g}"] = table[f"epochs_to_{threshold:g}"].astype("Int64")  # empty when never
+    for column in [c for c in SUMMARY_COLUMNS if "epochs_to_" in c]:
+        table[column] = table[column].astype("Int64")  # empty when never
     table["config"] = pd.Categorical(table["config"], categories=curves["config"].cat.categories, ordered=True)
     table["task_rank"] = table["task"].map(task_rank)
     return table.sort_values(["task_rank", "config"]).drop(columns="task_rank").reset_index(drop=True)

@@ -4,6 +4,7 @@ Output (``<FOLDER>/report`` unless ``--out``)::
 
     index.html                   tables, figures (embedded) and the list of runs
     figures/<name>.<format>      every figure
+    figures/animations/*.gif     per task, each configuration's policy animation (when the runs have some)
     tables/summary.csv|.md       per task x configuration
     tables/aggregate.csv|.md     per configuration across tasks
     tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
@@ -21,6 +22,7 @@ import argparse
 import base64
 import html
 import io
+import shutil
 import sys
 import time
 from dataclasses import dataclass, field
@@ -29,6 +31,8 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import pandas as pd
 
+from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
+                                 place_after_curves)
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, run_states
 from hersd.study import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
@@ -54,7 +58,8 @@ TABLE_NOTES = {
                 "<b>final_median</b>: median over seeds of each seed's smoothed success at its last epoch K. "
                 "<b>auc</b>: mean over epochs 1..K of the median smoothed curve (area under it, normalised to "
                 "[0, 1]). "
-                "<b>epochs_to_0.5 / 0.9</b>: first epoch the median smoothed curve reaches 0.5 / 0.9 (empty: never). "
+                "<b>epochs_to_0.5 / 0.9</b>: first epoch the median smoothed curve reaches 0.5 / 0.9 (empty: never); "
+                "<b>raw_epochs_to_0.5 / 0.9</b>: the same for the median of the raw test success. "
                 "<b>iqm</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
                 "interval [iqm_low, iqm_high] (seeded, 2000 resamples). <b>p_improve_HER</b>: P(X &gt; Y) + "
                 "0.5 P(X = Y) for X a seed's final success and Y a seed's of HER (eps = 0.8, no MEP) with the same "
@@ -171,8 +176,9 @@ def _html_figure(figure: ReportFigure, image: str) -> str:
 
 
 def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[tuple[ReportFigure, str]],
-               studies: Studies, study_images: list[str]) -> str:
-    """The report page: summary tables, figures (the composition table after its figure), studies, runs."""
+               studies: Studies, study_images: list[str], animations: dict[str, str]) -> str:
+    """The report page: summary tables, figures (the composition table after its figure, each task's
+    policy animations after its learning curves), studies, runs."""
     runs = table.runs
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
              f"<p>{_count(len(runs), 'run')} ({int((~runs['complete']).sum())} in progress: drawn in the learning "
@@ -186,12 +192,15 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
               html_table(analysis.summary), "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
               html_table(analysis.aggregate), "<h2>Figures</h2>"]
+    placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
         parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
                      f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
         if figure.name == f"composition_{PAPER_COMPOSITION_TASK}" and not analysis.composition_vs_paper.empty:
             parts += [f"<h3>Minibatch composition at epoch {PAPER_COMPOSITION_EPOCH}: hersd vs paper</h3>",
                       f"<p>{TABLE_NOTES['composition']}</p>", html_table(analysis.composition_vs_paper)]
+        parts += placed.get(figure.name, [])
+    parts += placed.get(None, [])
     if studies.read:
         parts.append("<h2>Optuna searches</h2>")
         for (stem, study), image in zip(studies.read.items(), study_images):
@@ -202,6 +211,21 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     parts += ["<h2>Runs</h2>", html_table(runs.assign(state=run_states(runs))[RUN_LIST_COLUMNS])]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def _copy_animations(analysis: Analysis, folder: Path, figures: Path) -> dict[str, str]:
+    """Copy each task's chosen policy animations (analysis.animations) into ``figures/animations/`` (emptied
+    first) -> task -> its page block, the GIFs linked by paths relative to the page."""
+    chosen = choose_animations(analysis, folder)
+    shutil.rmtree(figures / ANIMATIONS, ignore_errors=True)
+    blocks = {}
+    for task, items in chosen.items():
+        (figures / ANIMATIONS).mkdir(parents=True, exist_ok=True)
+        names = [file_name(index, item) for index, item in enumerate(items)]
+        for item, name in zip(items, names):
+            shutil.copyfile(item.source, figures / ANIMATIONS / name)
+        blocks[task] = animations_html(task, items, [f"{figures.name}/{ANIMATIONS}/{name}" for name in names])
+    return blocks
 
 
 def _study_figures(studies: Studies) -> list[ReportFigure]:
@@ -289,8 +313,9 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     written = _write_tables({**tables, "runs": runs.assign(state=run_states(runs)).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
-    index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):]),
-                     encoding="utf-8")
+    animations = _copy_animations(analysis, folder, out / "figures")
+    index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
+                                animations), encoding="utf-8")
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 

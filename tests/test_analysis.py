@@ -109,6 +109,8 @@ def test_summary_row_equals_hand_values(analysed):
     assert her["auc"] == pytest.approx(0.397222, abs=1e-6)
     assert her["epochs_to_0.5"] == 4
     assert pd.isna(her["epochs_to_0.9"])  # never reached: an empty cell
+    # raw medians per epoch: 0, 0.3, 0.6, 0.6, 0.9, 0.9 -> 0.5 first at epoch 3, 0.9 at epoch 5
+    assert her["raw_epochs_to_0.5"] == 3 and her["raw_epochs_to_0.9"] == 5
     assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)  # drop 0.4 and 1.0
     assert her["iqm_low"] <= her["iqm"] <= her["iqm_high"]
     assert her["p_improve_HER"] == pytest.approx(0.5)
