@@ -4,8 +4,8 @@ Applications") on the DDPG core's inputs, networks and settings.
 - policy: an MLP of DDPG's size giving the mean and log std (clamped to [-20, 2], as in the
   authors' code) of a Gaussian over pre-tanh actions; a = tanh(u), and
   log pi(a|s) = log N(u) - sum log(1 - tanh(u)^2 + 1e-6);
-- twin critics; target r + gamma * (min(Q1', Q2')(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'),
-  clipped to [q_min, 0] as in the DDPG core;
+- twin critics; soft target r + gamma * (min(Q1', Q2')(s', a') - alpha * log pi(a'|s')),
+  a' ~ pi(s'), not clipped (see ``SAC.target_q``);
 - actor loss mean(alpha * log pi(a|s) - min(Q1, Q2)(s, a)), a ~ pi(s) (no action_l2 term:
   the entropy term is SAC's regulariser);
 - temperature: log alpha (starting at log init_alpha) steps with Adam (alpha_lr) on
@@ -36,7 +36,8 @@ class SAC(DDPG):
 
     def __init__(self, cfg: DDPGConfig, sac: SACConfig, obs_dim: int, goal_dim: int, action_dim: int,
                  max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
-        self.cfg, self.max_action, self.gamma, self.q_min, self.device = cfg, max_action, gamma, q_min, device
+        # q_min is taken for the learners' common signature; SAC's soft target is not clipped.
+        self.cfg, self.max_action, self.gamma, self.device = cfg, max_action, gamma, device
         self.action_dim = action_dim
         self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm, device)
         self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm, device)
@@ -88,12 +89,19 @@ class SAC(DDPG):
 
     @torch.no_grad()
     def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
-        """r + gamma * (min Q'(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'), clipped to [q_min, 0]: (B, 1)."""
+        """r + gamma * (min Q'(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'), unclipped: (B, 1).
+
+        DDPG's clip to [q_min, 0] bounds discounted sums of non-positive rewards. A soft Q also
+        sums the discounted entropy bonuses -alpha * log pi of every later step, which are positive
+        for a wide policy and scale with a temperature that moves during training, so it has no
+        fixed range: clipping at 0 pins every target while the bonus outweighs the reward, and
+        clipping only r + gamma * min Q' would still cut the later bonuses that Q' carries. As in
+        the SAC authors' code (softlearning) and stable-baselines3, the soft target is not clipped.
+        """
         next_action, next_log_prob = self.sample(next_inputs)
         target_inputs = torch.cat([next_inputs, next_action], dim=1)
         next_q = torch.minimum(self.critic_target(target_inputs), self.critic2_target(target_inputs))
-        soft_q = next_q - self.log_alpha.exp() * next_log_prob
-        return torch.clamp(reward + self.gamma * soft_q, self.q_min, 0.0)
+        return reward + self.gamma * (next_q - self.log_alpha.exp() * next_log_prob)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
         """One step of both critics, the actor (through frozen critics) and the temperature."""

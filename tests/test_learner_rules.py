@@ -57,12 +57,15 @@ def test_update_targets_moves_every_target_by_one_minus_polyak(learner, pairs):
     assert learner == "td3" or not hasattr(agent, "actor_target")  # SAC has no actor target
 
 
-def test_sac_target_is_the_soft_min_of_the_twin_target_critics():
+@pytest.mark.parametrize("alpha", [0.1, 10.0])
+def test_sac_target_is_the_soft_min_of_the_twin_target_critics(alpha):
+    """y = r + gamma (min Q' - alpha log pi), unclipped: at alpha 10 the entropy bonus lifts most
+    targets of a reward -1 above 0, where DDPG's clip to [q_min, 0] would pin them."""
     agent = make("sac")
-    with torch.no_grad():  # Q2' = Q1' - 1 everywhere; a temperature other than 1
+    with torch.no_grad():  # Q2' = Q1' - 1 everywhere
         agent.critic2_target.load_state_dict(agent.critic_target.state_dict())
         agent.critic2_target[-1].bias -= 1.0
-        agent.log_alpha.fill_(math.log(0.1))
+        agent.log_alpha.fill_(math.log(alpha))
     data = batch()
     next_inputs = agent._inputs(data.next_obs, data.goal)
     reward = torch.full((BATCH, 1), -1.0)
@@ -78,8 +81,12 @@ def test_sac_target_is_the_soft_min_of_the_twin_target_critics():
                     - torch.log(1 - action ** 2 + 1e-6)).sum(1, keepdim=True)
         x = torch.cat([next_inputs, action], 1)
         q1, q2 = agent.critic_target(x), agent.critic2_target(x)
-    expected = torch.clamp(reward + 0.98 * (q2 - 0.1 * log_prob), -50, 0)
-    assert torch.all(q2 < q1) and torch.all((expected < 0) & (expected > -50))  # the min and no clip decide
+    expected = reward + 0.98 * (q2 - alpha * log_prob)
+    assert torch.all(q2 < q1)  # the min decides
+    if alpha > 1:  # a clip at 0 would change these
+        assert (expected > 1).sum() > BATCH // 2
+    else:  # inside [q_min, 0]: a clip would not matter
+        assert torch.all((expected < 0) & (expected > -50))
     assert torch.allclose(target, expected, atol=1e-5)
 
 
