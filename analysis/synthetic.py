@@ -14,7 +14,7 @@ import numpy as np
 
 from hersd.config import TrainConfig
 from hersd.runlog import LOG_NAME, RunLogWriter
-from hersd.runstore import config_hash
+from hersd.runstore import config_hash, policy_animation
 from hersd.schedules import relabel_rate
 
 
@@ -79,3 +79,20 @@ def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, compl
     else:
         writer.close()
     return folder / LOG_NAME
+
+
+def write_animation(folder: Path, epoch: int, width: int = 48, height: int = 36, frames: int = 4) -> Path:
+    """A small looping GIF standing in for a policy animation, ``<folder>/policy/epoch_<epoch>.gif`` next to a
+    run's log (what training's ``render_every`` writes): a square moving across a grey field; returns its path."""
+    from PIL import Image  # matplotlib's dependency: only when a test or benchmark wants animations
+
+    images = []
+    for index in range(frames):
+        pixels = np.full((height, width, 3), 200, np.uint8)
+        left = index * (width - height // 2) // max(1, frames - 1)
+        pixels[height // 4: 3 * height // 4, left: left + height // 2] = (40, 170, 60)
+        images.append(Image.fromarray(pixels).quantize(8))
+    path = policy_animation(Path(folder), epoch)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images[0].save(path, format="GIF", save_all=True, append_images=images[1:], duration=100, loop=0)
+    return path
