@@ -2,7 +2,7 @@
 
 Output (``<FOLDER>/report`` unless ``--out``)::
 
-    index.html                   tables, figures (embedded) and the list of runs
+    index.html                   tables, figures (embedded), policy animations (linked) and the list of runs
     figures/<name>.<format>      every figure
     figures/animations/*.gif     per task, each configuration's policy animation (when the runs have some)
     tables/summary.csv|.md       per task x configuration
