@@ -237,7 +237,7 @@ class TD3Config:
 class SACConfig:
     # SAC (Haarnoja et al. 2018, automatic temperature): squashed Gaussian policy, twin critics.
     init_alpha: float = 1.0  # initial entropy temperature alpha (log alpha 0: the usual start; the SAC paper gives none)
-    alpha_lr: float = 3e-4  # Adam learning rate of log(alpha): the SAC paper's (its one rate for every parameter)
+    alpha_lr: float = 1e-3  # Adam learning rate of log(alpha): the networks' (ddpg.actor_lr), as SAC uses one rate for every parameter
     target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
 
     def __post_init__(self) -> None:
