@@ -120,11 +120,21 @@ def make_render_env(task: TaskConfig) -> Any:
         env.reset(seed=0)
         env.render()
     except Exception as err:  # GL errors come as ImportError, RuntimeError, mujoco.FatalError, OpenGL errors
-        env.close()
+        close_render_env(env)
         first_line = (str(err).strip().splitlines() or [""])[0][:160]
         raise RenderError(f"MuJoCo cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL')} "
                           f"({type(err).__name__}: {first_line}); {GL_PACKAGES}") from None
     return env
+
+
+def close_render_env(env: Any) -> None:
+    """Free the viewer's MuJoCo GL objects in its own OpenGL context, then close the env. (Left to the garbage
+    collector, they are freed in whatever context is current then: a later render's, whose frames turn black.)"""
+    viewer = getattr(getattr(env, "mujoco_renderer", None), "viewer", None)
+    if viewer is not None and getattr(viewer, "con", None) is not None:
+        viewer.make_context_current()
+        viewer.con.free()
+    env.close()
 
 
 def _frame(env: Any, success: bool) -> np.ndarray:
@@ -169,7 +179,7 @@ def render_frames(agent: DDPG, cfg: TrainConfig, epoch: int,
             durations += [frame_ms] * (len(episode) - 1) + [END_PAUSE_MS]
             successes.append(success)
     finally:
-        env.close()
+        close_render_env(env)
     return np.stack(frames), durations, successes
 
 

@@ -14,7 +14,7 @@ from PIL import Image, ImageSequence
 import hersd.render
 import hersd.train
 from hersd.compose import compose_train
-from hersd.render import RenderError, headless_backend, main, renders_at
+from hersd.render import RenderError, close_render_env, headless_backend, main, make_render_env, renders_at
 from hersd.runstore import CHECKPOINT_NAME, policy_animation, policy_animations
 from hersd.train import train
 
@@ -50,6 +50,7 @@ def test_the_animation_shows_the_scene_moving(runs):
     assert frames[0].shape == (hersd.render.HEIGHT, hersd.render.WIDTH, 3)
     assert len(frames) == 2 * (50 // hersd.render.FRAME_STEP + 1)  # 2 episodes: the start and every 2nd step
     assert all(frame.std() > 20 for frame in frames[::10])  # not blank: table, robot, floor
+    assert all(frame.std() > 20 for frame in gif_frames(policy_animation(runs["1"].parent, 1))[::10])
     assert np.abs(frames[0].astype(int) - frames[len(frames) // 4]).mean() > 0.5  # the arm moved
     assert 20_000 < path.stat().st_size < 400_000
 
@@ -121,3 +122,18 @@ def test_headless_rendering_picks_egl_then_osmesa_else_names_the_packages(monkey
 def test_renders_at_every_nth_epoch_and_the_last():
     assert [k for k in range(1, 121) if renders_at(50, k, 120)] == [50, 100, 120]
     assert [k for k in range(1, 4) if renders_at(0, k, 3)] == []
+
+
+def test_a_render_env_collected_late_leaves_later_renders_alone():
+    """close_render_env frees the viewer's GL objects in its own context: a closed env the garbage collector
+    frees while another render's context is current must not blank that render's frames."""
+    headless_backend()
+    task = compose_train(["task=reach"]).task
+    closed: list = []
+    for _ in range(3):
+        env = make_render_env(task)
+        closed.clear()  # the previous env, closed already, freed now while this one's context is current
+        assert np.array(env.render()).std() > 20
+        close_render_env(env)
+        closed.append(env)
+        del env
