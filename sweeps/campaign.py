@@ -31,7 +31,7 @@ from typing import Callable, Sequence
 from hersd.compose import CONFIG_MODULE, explain_config_error, group_options
 from hersd.config import TrainConfig
 from hersd.runlog import LOG_NAME, RunLogError, read_records
-from hersd.runstore import LOCK_NAME, run_dir
+from hersd.runstore import LOCK_NAME, policy_animations, run_dir
 from sweeps.hydra_private import basic_sweeper_class, grid_overrides
 from sweeps.launch import job_train_config, register_schemas
 
@@ -219,20 +219,24 @@ def status(campaign: str, results_dir: Path) -> int:
 
 
 def land(campaign: str, results_dir: Path, into: Path) -> int:
-    """Copy every planned run's log (complete or not) to the same relative path below ``into``."""
+    """Copy every planned run's log (complete or not) and its policy animations to the same
+    relative paths below ``into``."""
     plan = plan_runs(load_campaign(campaign), results_dir)
     changed = []
     for run in plan:
-        source = results_dir / run.relative / LOG_NAME
-        if not source.exists():
+        source_dir, target_dir = results_dir / run.relative, into / run.relative
+        if not (source_dir / LOG_NAME).exists():
             continue
-        target = into / run.relative / LOG_NAME
-        copied = copy_atomically(source, target)
-        state = progress(target, run.epochs)
-        print(f"{'landed' if copied else 'unchanged':<9} {target}  {state}")
-        if copied:
-            changed.append(target)
-    print(f"{len(changed)} log(s) landed in {into}" + ("; commit them with:\n  git add -- "
+        copied = copy_atomically(source_dir / LOG_NAME, target_dir / LOG_NAME)
+        print(f"{'landed' if copied else 'unchanged':<9} {target_dir / LOG_NAME}  "
+              f"{progress(target_dir / LOG_NAME, run.epochs)}")
+        changed += [target_dir / LOG_NAME] if copied else []
+        for gif in policy_animations(source_dir).values():
+            target = target_dir / gif.relative_to(source_dir)
+            if copy_atomically(gif, target):
+                print(f"{'landed':<9} {target}")
+                changed.append(target)
+    print(f"{len(changed)} file(s) landed in {into}" + ("; commit them with:\n  git add -- "
                                                          + " ".join(shlex.quote(str(p)) for p in changed)
                                                          if changed else ""))
     return 0
@@ -331,7 +335,7 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
                                      metavar="{start,status,land,run}")
     for name, text in (("start", "start or resume the campaign in the background"),
                        ("status", "one line per planned run: complete, epoch N of K, or new"),
-                       ("land", "copy every planned run's run.mcap into the results folder"),
+                       ("land", "copy every planned run's run.mcap and animations into the results folder"),
                        ("run", "run the campaign in the foreground (what start runs)")):
         command = commands.add_parser(name, help=text, description=text)
         command.add_argument("--campaign", default=DEFAULT_CAMPAIGN, help=f"conf/campaign/<name>.yaml "

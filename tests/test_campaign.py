@@ -15,7 +15,7 @@ import pytest
 from analysis.synthetic import write_run
 from hersd.config import TrainConfig
 from hersd.runlog import read_records
-from hersd.runstore import run_lock
+from hersd.runstore import policy_animation, run_lock
 from sweeps import campaign
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
@@ -80,14 +80,18 @@ def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path,
     complete = write_log(results / runs[0].relative, 200, complete=True)
     running = write_log(results / runs[1].relative, 3, complete=False)
     (running.parent / "checkpoint.pt").write_bytes(b"not landed")
+    animation = policy_animation(complete.parent, 200)
+    animation.parent.mkdir()
+    animation.write_bytes(b"GIF89a a policy")
     into = tmp_path / "repo" / "results"
     assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
     out = capsys.readouterr().out
     assert f"landed    {into / runs[0].relative / 'run.mcap'}  complete" in out
     assert f"landed    {into / runs[1].relative / 'run.mcap'}  epoch 3 of 200" in out
-    assert "git add -- " in out
+    assert "3 file(s) landed" in out and "git add -- " in out
     landed = sorted(p.relative_to(into) for p in into.rglob("*") if p.is_file())
-    assert landed == sorted([runs[0].relative / "run.mcap", runs[1].relative / "run.mcap"])  # no checkpoint, no temp
+    assert landed == sorted([runs[0].relative / "run.mcap", runs[0].relative / "policy" / "epoch_200.gif",
+                             runs[1].relative / "run.mcap"])  # no checkpoint, no temp
     assert (into / runs[0].relative / "run.mcap").read_bytes() == complete.read_bytes()
 
     write_log(results / runs[1].relative, 5, complete=False)  # the run went on
