@@ -3,7 +3,9 @@
 - inputs: raw obs/goal clipped to +-clip_obs, normalised by running mean/std
   (std >= norm_eps), clipped to +-clip_norm;
 - actor: MLP -> tanh * max_action; critic: MLP over [obs, goal, action / max_action];
-- target Q clipped to [q_min, 0] (q_min = -max(lambda) / (1 - gamma)); no done mask;
+- target Q clipped to [q_min, q_max]: the bounds of a discounted sum of the env's weighted
+  rewards (hersd.run_state.discounting; Fetch: [-max(lambda) / (1 - gamma), 0], the reference
+  code's); no done mask;
 - actor loss = -mean Q(s, pi(s)) + action_l2 * mean((pi / max_action)^2);
 - targets are moved by polyak averaging once per cycle (:meth:`DDPG.update_targets`).
 
@@ -82,8 +84,9 @@ class DDPG:
     """Actor, critic, their targets and optimisers, and the input normalisers."""
 
     def __init__(self, cfg: DDPGConfig, obs_dim: int, goal_dim: int, action_dim: int, max_action: float,
-                 gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
-        self.cfg, self.max_action, self.gamma, self.q_min, self.device = cfg, max_action, gamma, q_min, device
+                 gamma: float, q_min: float, device: torch.device = torch.device("cpu"), q_max: float = 0.0):
+        self.cfg, self.max_action, self.gamma, self.device = cfg, max_action, gamma, device
+        self.q_min, self.q_max = q_min, q_max  # target Q's clip; q_max = 0 for rewards <= 0 (Fetch, Hand)
         self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm, device)
         self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm, device)
         in_dim = obs_dim + goal_dim
@@ -130,10 +133,10 @@ class DDPG:
 
     @torch.no_grad()
     def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
-        """r + gamma * Q'(s', pi'(s')) clipped to [q_min, 0]: next_inputs (B, in_dim), reward (B, 1) -> (B, 1)."""
+        """r + gamma * Q'(s', pi'(s')) clipped to [q_min, q_max]: next_inputs (B, in_dim), reward (B, 1) -> (B, 1)."""
         next_action = torch.tanh(self.actor_target(next_inputs))
         next_q = self.critic_target(torch.cat([next_inputs, next_action], dim=1))
-        return torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
+        return torch.clamp(reward + self.gamma * next_q, self.q_min, self.q_max)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
         """One simultaneous actor and critic step on a batch of B transitions.

@@ -15,23 +15,29 @@ variants and the touch-sensor variants are covered alike):
   (shadow_dexterous_hand/manipulate.py). The env's own batched ``compute_reward`` is wrong
   for ignore_z_target_rotation (the Pen tasks): it overwrites row 2 of the Euler batch
   instead of column 2; the rule here applies the per-pair one to every row;
+- maze (PointMaze, AntMaze): the env's own ``compute_reward``, which takes batches: sparse
+  1 where ||a - g|| <= 0.45, else 0; dense exp(-||a - g||) (envs/maze/maze_v4.py);
 - other: the env's own ``compute_reward`` when it accepts a batch (probed at creation: a
-  2-row call must equal the two 1-row calls, e.g. the mazes), else one call per row (slow).
+  2-row call must equal the two 1-row calls), else one call per row (slow).
 
 Unlike the env's own batched ``compute_reward``, the rules here are also right for the Pen
 tasks and take goals with more than one leading dimension (the env's quaternion product
 asserts on (n, T, 7) arrays).
 
 Rewards are float32 (...,) for goals (..., goal_dim). The env's settings (thresholds, reward
-type, targets) are read once, when :func:`vectorised_reward` is called. hersd's target clip
-to [q_min, 0] assumes rewards in [-1, 0] (Fetch, Hand); ``hersd.envs.reward_function``
-refuses an env with other rewards (the mazes' sparse reward is 1 on success, else 0).
+type, targets) are read once, when :func:`vectorised_reward` is called.
+
+The family also gives what the learner needs besides the reward: :func:`reward_range`, the
+bounds of one reward (the critic's target clip follows from them, hersd/run_state.py), and
+:func:`success_radius`, the goal distance that counts as success (logged with the run).
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import math
+from functools import partial
 from typing import Any, Callable
 
 import gymnasium as gym
@@ -42,7 +48,11 @@ with contextlib.redirect_stderr(io.StringIO()):  # gymnasium-robotics' import-ti
 
 RewardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
-_FAMILY_BASES = {"BaseFetchEnv": "fetch", "BaseHandReachEnv": "hand_reach", "BaseManipulateEnv": "hand_manipulate"}
+_FAMILY_BASES = {"BaseFetchEnv": "fetch", "BaseHandReachEnv": "hand_reach", "BaseManipulateEnv": "hand_manipulate",
+                 "MazeEnv": "maze"}
+# The mazes' success radius, fixed in their compute_reward, compute_terminated and info["success"]
+# (gymnasium_robotics/envs/maze/maze_v4.py): they have no distance_threshold attribute.
+MAZE_SUCCESS_RADIUS = 0.45
 
 
 def is_goal_env(env: Any) -> bool:
@@ -60,7 +70,7 @@ def is_goal_env(env: Any) -> bool:
 
 
 def reward_family(env: Any) -> str:
-    """fetch | hand_reach | hand_manipulate | other: which rule :func:`vectorised_reward` uses."""
+    """fetch | hand_reach | hand_manipulate | maze | other: which rule :func:`vectorised_reward` uses."""
     env = getattr(env, "unwrapped", env)
     for cls in type(env).__mro__:
         if cls.__module__.startswith("gymnasium_robotics.") and cls.__name__ in _FAMILY_BASES:
@@ -85,12 +95,48 @@ def vectorised_reward(env: Any) -> RewardFn:
     return _env_reward(env)
 
 
-def _distance_reward(threshold: float, sparse: bool) -> RewardFn:
-    def reward(achieved: np.ndarray, desired: np.ndarray) -> np.ndarray:
-        distance = np.linalg.norm(achieved - desired, axis=-1)
-        return -(distance > threshold).astype(np.float32) if sparse else (-distance).astype(np.float32)
+def reward_range(env: Any) -> tuple[float, float]:
+    """(lowest, highest) reward the env can give, by family; an infinite bound where none is known.
 
-    return reward
+    Sparse Fetch and Hand rewards are -1 or 0; their dense rewards, -distance, have no lower
+    bound the env states (-inf). The mazes give 0 or 1 (sparse) and exp(-distance) in (0, 1]
+    (dense). Any other env's range is unknown: (-inf, inf)."""
+    env = getattr(env, "unwrapped", env)
+    family = reward_family(env)
+    if family == "maze":
+        return 0.0, 1.0
+    if family == "other":
+        return -math.inf, math.inf
+    return (-1.0 if env.reward_type == "sparse" else -math.inf), 0.0
+
+
+def success_radius(env: Any) -> float:
+    """The goal distance within which the env counts success: its ``distance_threshold`` (Fetch, Hand;
+    for HandManipulate the position's, next to its rotation_threshold), the mazes' fixed 0.45,
+    NaN for an env that states none."""
+    env = getattr(env, "unwrapped", env)
+    if reward_family(env) == "maze":
+        return MAZE_SUCCESS_RADIUS
+    return float(getattr(env, "distance_threshold", math.nan))
+
+
+def goal_reward(achieved: np.ndarray, desired: np.ndarray, distance_threshold: float) -> np.ndarray:
+    """The sparse reward of Fetch and HandReach: 0 where ||achieved - desired|| <= threshold, else -1.
+
+    achieved, desired: (..., goal_dim) -> (...,) float32. Same rule as the envs' compute_reward.
+    """
+    distance = np.linalg.norm(achieved - desired, axis=-1)
+    return -(distance > distance_threshold).astype(np.float32)
+
+
+def _distance_reward(threshold: float, sparse: bool) -> RewardFn:
+    if sparse:
+        return partial(goal_reward, distance_threshold=threshold)
+
+    def dense_reward(achieved: np.ndarray, desired: np.ndarray) -> np.ndarray:
+        return (-np.linalg.norm(achieved - desired, axis=-1)).astype(np.float32)
+
+    return dense_reward
 
 
 def _manipulate_reward(env: Any) -> RewardFn:

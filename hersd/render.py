@@ -30,7 +30,7 @@ from PIL import Image
 
 from hersd.config import ConfigError, TaskConfig, TrainConfig, to_train_config
 from hersd.ddpg import DDPG
-from hersd.envs import env_spec, make_env
+from hersd.envs import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run
 from hersd.runstore import CHECKPOINT_NAME, policy_animation
@@ -155,7 +155,7 @@ def episode_frames(env: Any, agent: DDPG, horizon: int, seed: int,
         action = agent.act(obs["observation"][None].astype(np.float32),
                            obs["desired_goal"][None].astype(np.float32), explore=False, rng=rng)[0]
         obs, _reward, _terminated, _truncated, info = env.step(action)
-        success = bool(info["is_success"] > 0)
+        success = step_success(info)
         if step % FRAME_STEP == 0 or step == horizon:
             frames.append(_frame(env, success))
     return frames, success
@@ -247,7 +247,7 @@ def policy_from_checkpoint(cfg: TrainConfig, checkpoint: dict[str, Any]) -> DDPG
     env = make_env(cfg.task)
     spec = env_spec(env)
     env.close()
-    agent = make_agent(cfg, spec, *discounting(cfg, spec.horizon), torch.device("cpu"))
+    agent = make_agent(cfg, spec, *discounting(cfg, spec), torch.device("cpu"))
     agent.load_state_dict(checkpoint["agent"])
     return agent
 

@@ -29,7 +29,7 @@ class Episodes(NamedTuple):
 class TransitionBatch(NamedTuple):
     """B sampled transitions: obs/next_obs (B, obs_dim), goal (B, goal_dim), action
     (B, action_dim), reward (B,) already weighted by lambda_r or lambda_h, relabelled (B,)
-    bool, real_success (B,) bool (kept real and rewarded as success), episode/t (B,) int."""
+    bool, real_success (B,) bool (kept real and given the success reward), episode/t (B,) int."""
 
     obs: np.ndarray
     next_obs: np.ndarray
@@ -105,13 +105,16 @@ def hindsight_time(t: np.ndarray, horizon: int, strategy: str, rng: np.random.Ge
 
 def sample_transitions(episodes: Episodes, batch_size: int, relabel_prob: float, rng: np.random.Generator,
                        reward_fn: RewardFn, lambda_real: float = 1.0, lambda_hindsight: float = 1.0,
-                       strategy: str = "future", episode_probs: Optional[np.ndarray] = None) -> TransitionBatch:
+                       strategy: str = "future", episode_probs: Optional[np.ndarray] = None,
+                       success_reward: float = 0.0) -> TransitionBatch:
     """Draw batch_size transitions and relabel each with probability relabel_prob.
 
     Episodes are drawn uniformly (or by ``episode_probs``, shape (n,), summing to 1), t
     uniformly in 0..T-1. Example with T = 50: a transition at t = 47 that is relabelled under
     'future' takes its goal from achieved[e, 48], [e, 49] or [e, 50]; its reward becomes
-    lambda_hindsight * reward_fn(achieved[e, 48], that goal).
+    lambda_hindsight * reward_fn(achieved[e, 48], that goal). ``success_reward`` is the raw
+    reward that marks success (a sparse reward's highest: 0 for Fetch and Hand, 1 for the
+    mazes); it only sorts the real transitions into real successes and failures.
     """
     n_episodes, horizon = episodes.goal.shape[0], episodes.goal.shape[1]
     if episode_probs is None:
@@ -131,5 +134,5 @@ def sample_transitions(episodes: Episodes, batch_size: int, relabel_prob: float,
     return TransitionBatch(
         obs=episodes.obs[episode, t], next_obs=episodes.obs[episode, t + 1], goal=goal,
         action=episodes.action[episode, t], reward=reward.astype(np.float32), relabelled=relabelled,
-        real_success=~relabelled & (raw_reward == 0), episode=episode, t=t,
+        real_success=~relabelled & (raw_reward == success_reward), episode=episode, t=t,
     )

@@ -17,7 +17,8 @@ import torch
 
 from hersd.config import ConfigError, TrainConfig
 from hersd.ddpg import DDPG
-from hersd.envs import EnvSpec, env_spec, make_env, reward_function
+from hersd.envs import EnvSpec, check_success_reported, env_spec, make_env
+from hersd.goal_envs import vectorised_reward
 from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer
 from hersd.resources import available_memory_bytes
@@ -28,8 +29,8 @@ class RunState:
 
     ``epochs_done`` counts finished epochs; ``env_steps`` and ``updates`` are cumulative;
     ``train_success`` holds each finished epoch's train success (a success schedule's input).
-    ``spec`` holds the task's sizes; ``gamma`` and ``q_min`` (the lower clip of target Q,
-    -max(lambda_r, lambda_h) / (1 - gamma)) follow from it and the config.
+    ``spec`` holds what the task's env gives (sizes, horizon, reward range); ``gamma`` and
+    ``q_range`` (the clip of target Q, :func:`discounting`) follow from it and the config.
     """
 
     def __init__(self, cfg: TrainConfig, device: torch.device = torch.device("cpu")):
@@ -41,14 +42,15 @@ class RunState:
         first_env = make_env(cfg.task)  # the task's sizes: the memory check runs before the other envs exist
         self.spec = spec = env_spec(first_env)
         check_memory(cfg, spec, env_bytes(first_env))
+        check_success_reported(first_env, cfg.task)
         self.train_envs = [first_env] + [make_env(cfg.task) for _ in range(d.rollouts_per_cycle - 1)]
         self.test_envs = [make_env(cfg.task) for _ in range(d.rollouts_per_cycle)]
         for envs, seq in ((self.train_envs, seeds[2]), (self.test_envs, seeds[3])):
             for env, env_seed in zip(envs, seq.generate_state(len(envs))):
                 env.reset(seed=int(env_seed))
-        self._reward = reward_function(self.train_envs[0], cfg.task.env_id)
-        self.gamma, self.q_min = discounting(cfg, spec.horizon)
-        self.agent = make_agent(cfg, spec, self.gamma, self.q_min, device)
+        self._reward = vectorised_reward(self.train_envs[0])
+        self.gamma, self.q_range = discounting(cfg, spec)
+        self.agent = make_agent(cfg, spec, self.gamma, self.q_range, device)
         self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
         # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
         self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
@@ -56,14 +58,16 @@ class RunState:
         self.train_success: list[float] = []
 
     def reward(self, achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """The task's sparse reward for achieved and desired goals (..., goal_dim) -> (...,) float32."""
+        """The env's reward for achieved and desired goals (..., goal_dim) -> (...,) float32."""
         return self._reward(achieved, goal)
 
     def effective_totals(self) -> dict[str, Any]:
         """Totals that make runs comparable whatever the worker layout (logged with the run)."""
         cfg, d, horizon = self.cfg, self.cfg.ddpg, self.spec.horizon
         steps_per_cycle = d.rollouts_per_cycle * horizon
-        return {"horizon": horizon, "gamma": self.gamma, "q_target_range": [self.q_min, 0.0],
+        # q_target_range: the clip of target Q (an infinite bound, logged as null, is none); SAC clips nothing
+        q_target_range = None if cfg.learner.name == "sac" else list(self.q_range)
+        return {"horizon": horizon, "gamma": self.gamma, "q_target_range": q_target_range,
                 "distance_threshold": self.spec.distance_threshold, "batch_size": d.batch_size,
                 "env_steps_per_epoch": cfg.task.cycles_per_epoch * steps_per_cycle,
                 "updates_per_epoch": cfg.task.cycles_per_epoch * d.batches_per_cycle,
@@ -101,24 +105,39 @@ class RunState:
             env.close()
 
 
-def discounting(cfg: TrainConfig, horizon: int) -> tuple[float, float]:
-    """(gamma, q_min): ``ddpg.gamma`` (null: 1 - 1/T) and target Q's lower clip -max(lambda_r, lambda_h) / (1 - gamma)."""
-    gamma = cfg.ddpg.gamma if cfg.ddpg.gamma is not None else 1.0 - 1.0 / horizon
-    return gamma, -max(cfg.algo.lambda_r, cfg.algo.lambda_h) / (1.0 - gamma)
+def discounting(cfg: TrainConfig, spec: EnvSpec) -> tuple[float, tuple[float, float]]:
+    """(gamma, (q_low, q_high)): ``ddpg.gamma`` (null: 1 - 1/T) and the range target Q is clipped to.
+
+    A discounted sum of rewards r in [r_low, r_high] (``spec.reward_range``), each weighted by
+    lambda_r (real) or lambda_h (hindsight), lies in
+    [min(0, lambda r_low) / (1 - gamma), max(0, lambda r_high) / (1 - gamma)] over both lambdas.
+    Fetch and Hand (rewards -1 or 0): [-max(lambda_r, lambda_h) / (1 - gamma), 0], the reference
+    code's clip; the mazes (0 or 1): [0, max(lambda) / (1 - gamma)]; an infinite reward bound
+    (dense Fetch and Hand rewards below, an unknown env's both sides) leaves that side unclipped.
+    """
+    gamma = cfg.ddpg.gamma if cfg.ddpg.gamma is not None else 1.0 - 1.0 / spec.horizon
+    r_low, r_high = spec.reward_range
+    lambdas = (cfg.algo.lambda_r, cfg.algo.lambda_h)
+    q_low = min(0.0, *(lam * r_low for lam in lambdas)) / (1.0 - gamma)
+    q_high = max(0.0, *(lam * r_high for lam in lambdas)) / (1.0 - gamma)
+    return gamma, (q_low, q_high)
 
 
-def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_min: float, device: torch.device) -> DDPG:
-    """The learner of ``cfg.learner.name``; every learner has DDPG's interface (act, update, update_targets, ...)."""
-    sizes = (spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_min, device)
+def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_range: tuple[float, float],
+               device: torch.device) -> DDPG:
+    """The learner of ``cfg.learner.name``; every learner has DDPG's interface (act, update, update_targets, ...).
+    DDPG and TD3 clip target Q to ``q_range``; SAC's soft target is not clipped (hersd/sac.py)."""
+    q_low, q_high = q_range
+    sizes = (spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_low, device)
     if cfg.learner.name == "td3":
         from hersd.td3 import TD3
 
-        return TD3(cfg.ddpg, cfg.learner.td3, *sizes)
+        return TD3(cfg.ddpg, cfg.learner.td3, *sizes, q_max=q_high)
     if cfg.learner.name == "sac":
         from hersd.sac import SAC
 
         return SAC(cfg.ddpg, cfg.learner.sac, *sizes)
-    return DDPG(cfg.ddpg, *sizes)
+    return DDPG(cfg.ddpg, *sizes, q_max=q_high)
 
 
 def env_bytes(env: Any) -> int:

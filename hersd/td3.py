@@ -2,7 +2,7 @@
 
 Differences from :class:`hersd.ddpg.DDPG`, and nothing else:
 
-- twin critics; both regress to r + gamma * min(Q1', Q2')(s', a'), clipped to [q_min, 0];
+- twin critics; both regress to r + gamma * min(Q1', Q2')(s', a'), clipped to [q_min, q_max];
 - target policy smoothing: a' = clip(pi'(s') + clip(N(0, policy_noise), +-noise_clip), +-1)
   in the tanh scale (a share of max action), the noise drawn from torch's generator;
 - the actor steps once per ``policy_delay`` updates, on the first of each group (updates 1, 3,
@@ -29,8 +29,9 @@ class TD3(DDPG):
     """DDPG's actor, normalisers and exploration with twin critics, smoothed targets, delayed actor steps."""
 
     def __init__(self, cfg: DDPGConfig, td3: TD3Config, obs_dim: int, goal_dim: int, action_dim: int,
-                 max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
-        super().__init__(cfg, obs_dim, goal_dim, action_dim, max_action, gamma, q_min, device)
+                 max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu"),
+                 q_max: float = 0.0):
+        super().__init__(cfg, obs_dim, goal_dim, action_dim, max_action, gamma, q_min, device, q_max)
         self.td3 = td3
         self.critic2 = mlp(obs_dim + goal_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
         self.critic2_target = copy.deepcopy(self.critic2).requires_grad_(False)
@@ -40,13 +41,13 @@ class TD3(DDPG):
 
     @torch.no_grad()
     def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
-        """r + gamma * min(Q1', Q2')(s', smoothed pi'(s')) clipped to [q_min, 0]: (B, in_dim), (B, 1) -> (B, 1)."""
+        """r + gamma * min(Q1', Q2')(s', smoothed pi'(s')) clipped to [q_min, q_max]: (B, in_dim), (B, 1) -> (B, 1)."""
         next_action = torch.tanh(self.actor_target(next_inputs))
         noise = (torch.randn_like(next_action) * self.td3.policy_noise).clamp(-self.td3.noise_clip, self.td3.noise_clip)
         next_action = (next_action + noise).clamp(-1.0, 1.0)
         target_inputs = torch.cat([next_inputs, next_action], dim=1)
         next_q = torch.minimum(self.critic_target(target_inputs), self.critic2_target(target_inputs))
-        return torch.clamp(reward + self.gamma * next_q, self.q_min, 0.0)
+        return torch.clamp(reward + self.gamma * next_q, self.q_min, self.q_max)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
         """Both critics step on every call; the actor on every ``policy_delay``-th (counted across calls)."""

@@ -25,6 +25,7 @@ import torch
 import hersd
 from hersd.config import TrainConfig
 from hersd.ddpg import DDPG, UpdateStats
+from hersd.envs import step_success
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
 from hersd.render import RenderError, render_policy, renders_at
 from hersd.resources import machine_info, resolve_device, resolve_threads
@@ -64,24 +65,28 @@ def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
 # --------------------------------------------------------------------------- the steps of an epoch
 def run_episodes(envs: list, agent: DDPG, horizon: int, explore: bool,
                  rng: np.random.Generator) -> tuple[Episodes, np.ndarray]:
-    """One episode in each env, stepped in lockstep -> (Episodes of n = len(envs), success (n,) bool)."""
+    """One episode in each env, stepped in lockstep -> (Episodes of n = len(envs), success (n,) bool at the
+    last step). Each step's goal is the desired goal of its observation (constant in Fetch, Hand and the
+    registered mazes; an env may move it once reached)."""
     n = len(envs)
     first = [env.reset()[0] for env in envs]
     obs = np.empty((n, horizon + 1, first[0]["observation"].shape[0]), np.float32)
     achieved = np.empty((n, horizon + 1, first[0]["achieved_goal"].shape[0]), np.float32)
-    goal = np.stack([o["desired_goal"] for o in first]).astype(np.float32)
+    goals = np.empty((n, horizon, first[0]["desired_goal"].shape[0]), np.float32)
     actions = np.empty((n, horizon, envs[0].action_space.shape[0]), np.float32)
     obs[:, 0] = [o["observation"] for o in first]
     achieved[:, 0] = [o["achieved_goal"] for o in first]
+    desired = [o["desired_goal"] for o in first]
     success = np.zeros(n, bool)
     for t in range(horizon):
-        actions[:, t] = agent.act(obs[:, t], goal, explore, rng)
+        goals[:, t] = desired
+        actions[:, t] = agent.act(obs[:, t], goals[:, t], explore, rng)
         for i, env in enumerate(envs):
             step_obs, _reward, _terminated, _truncated, info = env.step(actions[i, t])
             obs[i, t + 1] = step_obs["observation"]
             achieved[i, t + 1] = step_obs["achieved_goal"]
-            success[i] = info["is_success"] > 0
-    goals = np.repeat(goal[:, None], horizon, axis=1)
+            desired[i] = step_obs["desired_goal"]
+            success[i] = step_success(info)
     return Episodes(obs, achieved, goals, actions), success
 
 
@@ -162,7 +167,8 @@ def update(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
     episode_probs = state.prioritizer.probs(state.buffer.size) if state.prioritizer is not None else None
     for _batch in range(d.batches_per_cycle):
         batch = sample_transitions(stored, d.batch_size, relabel_prob, state.rng, state.reward, algo.lambda_r,
-                                   algo.lambda_h, algo.goal_strategy, episode_probs=episode_probs)
+                                   algo.lambda_h, algo.goal_strategy, episode_probs=episode_probs,
+                                   success_reward=state.spec.reward_range[1])
         stats.add_update(state.agent.update(batch), batch)
     state.agent.update_targets()
     state.updates += d.batches_per_cycle

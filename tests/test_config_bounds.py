@@ -122,7 +122,8 @@ def test_composed_overrides_are_checked_as_the_dataclasses_are(override, field):
         compose_train(["task=reach", override])
 
 
-FETCH = EnvSpec(obs_dim=25, goal_dim=3, action_dim=4, horizon=50, max_action=1.0, distance_threshold=0.05)
+FETCH = EnvSpec(obs_dim=25, goal_dim=3, action_dim=4, horizon=50, max_action=1.0, distance_threshold=0.05,
+               reward_range=(-1.0, 0.0))
 
 
 @pytest.mark.parametrize("overrides, setting", [

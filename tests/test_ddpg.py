@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from hersd.config import DDPGConfig
+from hersd.config import DDPGConfig, TD3Config
 from hersd.ddpg import DDPG
 from hersd.replay import TransitionBatch
+from hersd.td3 import TD3
 
 OBS, GOAL, ACTION, BATCH = 5, 3, 2, 16
 
@@ -43,6 +44,18 @@ def test_target_q_is_clipped_to_its_range(reward, bound):
     assert torch.all(target == bound)
     unclipped = agent.target_q(next_inputs, torch.full((BATCH, 1), -1.0))
     assert torch.all((unclipped < 0) & (unclipped > -50))  # in range: untouched by the clip
+
+
+@pytest.mark.parametrize("learner", ["ddpg", "td3"])
+@pytest.mark.parametrize("reward, bound", [(1e6, 50.0), (-1e6, 0.0)])
+def test_target_q_of_rewards_0_or_1_is_clipped_to_0_and_q_max(learner, reward, bound):
+    """The mazes' range (rewards 0 or 1): target Q in [0, 1 / (1 - gamma)] (hersd.run_state.discounting)."""
+    torch.manual_seed(0)
+    cfg, sizes = DDPGConfig(hidden_layers=2, hidden_units=16), (OBS, GOAL, ACTION, 1.0, 0.98, 0.0)
+    agent = DDPG(cfg, *sizes, q_max=50.0) if learner == "ddpg" else TD3(cfg, TD3Config(), *sizes, q_max=50.0)
+    data = batch()
+    target = agent.target_q(agent._inputs(data.next_obs, data.goal), torch.full((BATCH, 1), reward))
+    assert torch.all(target == bound)
 
 
 def test_polyak_moves_targets_by_one_minus_polyak_towards_the_online_networks():

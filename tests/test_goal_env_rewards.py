@@ -1,6 +1,7 @@
 """hersd.goal_envs: the vectorised reward of each env family equals the env's own compute_reward
 on (achieved, desired) pairs drawn from real observations (pair by pair: the env's batched call is
-wrong for the Pen tasks, see hersd/goal_envs.py)."""
+wrong for the Pen tasks, see hersd/goal_envs.py); the family's reward range and success radius
+are the env's."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 import hersd.envs  # noqa: F401  (registers the gymnasium-robotics envs quietly)
-from hersd.goal_envs import is_goal_env, reward_family, vectorised_reward
+from hersd.goal_envs import is_goal_env, reward_family, reward_range, success_radius, vectorised_reward
 
 FAMILIES = {
     "FetchReach-v4": "fetch",
@@ -19,7 +20,9 @@ FAMILIES = {
     "HandManipulateEggFull-v1": "hand_manipulate",  # position and rotation both count
     "HandManipulateBlockFullDense-v1": "hand_manipulate",  # dense: -(10 d_pos + d_rot)
     "HandManipulatePenRotate-v1": "hand_manipulate",  # ignore_z_target_rotation
-    "PointMaze_UMaze-v3": "other",
+    "PointMaze_UMaze-v3": "maze",  # 1 on success, else 0
+    "PointMaze_UMazeDense-v3": "maze",  # exp(-distance)
+    "AntMaze_UMaze-v5": "maze",
 }
 
 
@@ -103,6 +106,28 @@ def test_vectorised_reward_equals_the_envs_own_compute_reward_row_by_row(case):
         assert len(np.unique(reward)) == 2, np.unique(reward)
 
 
+def test_rewards_lie_in_the_familys_range_and_sparse_ones_at_its_two_ends(case):
+    env_id, env, achieved, desired = case
+    low, high = reward_range(env)
+    reward = vectorised_reward(env)(achieved, desired)
+    assert np.all((low <= reward) & (reward <= high)), (low, high, reward.min(), reward.max())
+    if "Dense" not in env_id:
+        assert set(np.unique(reward)) == {low, high}
+    else:
+        assert np.isinf(low) or low < reward.min()  # a dense reward: the range is a bound, not the values
+
+
+@pytest.mark.parametrize("env_id", ["FetchReach-v4", "HandReach-v3", "PointMaze_UMaze-v3"])
+def test_the_success_radius_is_where_the_envs_sparse_reward_changes(env_id):
+    env = gym.make(env_id).unwrapped
+    radius, (low, high) = success_radius(env), reward_range(env)
+    goal = np.zeros(env.observation_space["desired_goal"].shape[0])
+    inside, outside = goal.copy(), goal.copy()
+    inside[0], outside[0] = 0.99 * radius, 1.01 * radius
+    assert (env.compute_reward(inside, goal, {}), env.compute_reward(outside, goal, {})) == (high, low)
+    env.close()
+
+
 def test_vectorised_reward_takes_float32_goals_and_any_leading_shape(case):
     """The replay stores goals as float32 and may pass (n, T, g) arrays."""
     env_id, env, achieved, desired = case
@@ -149,6 +174,7 @@ def test_an_env_that_takes_one_pair_at_a_time_is_called_per_row():
     expected = [env.compute_reward(a, d, {}) for a, d in zip(achieved, desired)]
     assert reward_family(env) == "other" and len(set(expected)) == 2
     assert vectorised_reward(env)(achieved, desired).tolist() == expected
+    assert reward_range(env) == (-np.inf, np.inf) and np.isnan(success_radius(env))  # nothing known: no clip
 
 
 def test_envs_without_vector_goals_are_refused():

@@ -10,7 +10,7 @@ import hersd.run_state as run_state_module
 import hersd.train as train_module
 from hersd.compose import compose_train as compose
 from hersd.config import MEPConfig
-from hersd.envs import goal_reward
+from hersd.goal_envs import goal_reward
 from hersd.mep import EpisodePrioritizer, entropy, rank_priorities
 from hersd.replay import Episodes, sample_transitions
 from conftest import TIMING

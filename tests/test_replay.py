@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hersd.envs import goal_reward
+from hersd.goal_envs import goal_reward
 from hersd.replay import EpisodeBuffer, Episodes, sample_transitions
 
 T, N_EPISODES = 50, 40
@@ -79,6 +79,22 @@ def test_real_successes_are_counted():
     goal[:] = episodes.achieved[:, 1:]  # every real transition reaches its own goal
     batch = sample_transitions(episodes._replace(goal=goal), 1000, 0.25, np.random.default_rng(6), reward_fn)
     assert np.array_equal(batch.real_success, ~batch.relabelled)
+
+
+def test_real_successes_are_the_success_reward_of_the_env():
+    """A maze-like reward (1 on success, 0 otherwise): success_reward=1 sorts the real transitions,
+    and a failure's 0 is not taken for the Fetch success reward."""
+    episodes = encoded_episodes()
+    goal = episodes.goal.copy()
+    goal[::2] = episodes.achieved[::2, 1:]  # real transitions of even episodes reach their goal
+
+    def maze_reward(achieved, desired):
+        return goal_reward(achieved, desired, 0.05) + np.float32(1.0)
+
+    batch = sample_transitions(episodes._replace(goal=goal), 1000, 0.25, np.random.default_rng(6), maze_reward,
+                               success_reward=1.0)
+    assert np.array_equal(batch.real_success, ~batch.relabelled & (batch.episode % 2 == 0))
+    assert batch.real_success.any() and (~batch.relabelled & ~batch.real_success).any()
 
 
 def test_same_generator_state_gives_same_batch():
