@@ -6,7 +6,7 @@ One process spins on one core (a neighbour: another run, a build, a second termi
 each epoch's seconds (from the run log) and the ratios to threads=1; the goal is auto / 1 <= 1.05.
 Run it on an otherwise quiet machine (pause long runs with kill -STOP).
 
-    python benchmarks/bench_threads.py [--repeats 2]
+    python benchmarks/bench_threads.py [--repeats 3]
 """
 
 from __future__ import annotations
@@ -29,14 +29,14 @@ def epoch_seconds(threads: str, results: Path) -> tuple[float, int]:
     """One fresh 1-epoch FetchReach run -> (its epoch's seconds, the threads it logged)."""
     folder = Path(tempfile.mkdtemp(dir=results))
     subprocess.run(["hersd-train", "task=reach", "epochs=1", "quiet=true", f"threads={threads}",
-                    f"results_dir={folder}"], check=True)
+                    f"results_dir={folder}"], check=True, stdout=subprocess.DEVNULL)
     log = read_run(next(folder.rglob("run.mcap")))
     return float(log.epochs["epoch_seconds"].iloc[0]), int(log.meta["threads"])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     cores = available_cores()
     if cores < 2:
@@ -57,7 +57,9 @@ def main() -> None:
     print(f"{cores} cores, one busy neighbour; 1-epoch FetchReach, median of {args.repeats}:")
     for setting in settings:
         median = statistics.median(seconds[setting])
-        print(f"  threads={setting:<5} (ran {logged[setting]} threads): {median:6.2f} s  {median / base:5.2f}x threads=1")
+        runs = " ".join(f"{value:.2f}" for value in seconds[setting])
+        print(f"  threads={setting:<5} (ran {logged[setting]} threads): {median:6.2f} s  {median / base:5.2f}x threads=1"
+              f"  (runs: {runs})")
     ratio = statistics.median(seconds["auto"]) / base
     print(f"auto / 1 = {ratio:.2f} (goal <= 1.05): {'met' if ratio <= 1.05 else 'NOT met'}")
 
