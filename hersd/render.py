@@ -29,7 +29,7 @@ import torch
 from PIL import Image
 
 from hersd.config import ConfigError, TaskConfig, TrainConfig, to_train_config
-from hersd.ddpg import DDPG
+from hersd.learner import GoalConditionedLearner
 from hersd.envs import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run
@@ -144,7 +144,7 @@ def _frame(env: Any, success: bool) -> np.ndarray:
     return frame
 
 
-def episode_frames(env: Any, agent: DDPG, horizon: int, seed: int,
+def episode_frames(env: Any, agent: GoalConditionedLearner, horizon: int, seed: int,
                    rng: np.random.Generator) -> tuple[list[np.ndarray], bool]:
     """One deterministic test episode from ``env.reset(seed=seed)`` -> (its frames: the start, then every
     FRAME_STEP-th step and the last, each (HEIGHT, WIDTH, 3) uint8; success at the last step)."""
@@ -161,7 +161,7 @@ def episode_frames(env: Any, agent: DDPG, horizon: int, seed: int,
     return frames, success
 
 
-def render_frames(agent: DDPG, cfg: TrainConfig, epoch: int,
+def render_frames(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int,
                   episodes: int = DEFAULT_EPISODES) -> tuple[np.ndarray, list[int], list[bool]]:
     """``episodes`` deterministic test episodes of the policy after ``epoch`` -> (frames (n, HEIGHT, WIDTH, 3)
     uint8, each frame's duration in ms (n,), each episode's success). The env seeds come from a Generator
@@ -198,7 +198,7 @@ def write_gif(frames: np.ndarray, durations: Sequence[int], path: Path) -> int:
     return path.stat().st_size
 
 
-def render_policy(agent: DDPG, cfg: TrainConfig, epoch: int, path: Path,
+def render_policy(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int, path: Path,
                   episodes: int = DEFAULT_EPISODES) -> Animation:
     """Render ``episodes`` test episodes of ``agent`` (the policy after ``epoch``) into the GIF ``path``."""
     start = time.perf_counter()
@@ -242,7 +242,7 @@ def load_run(directory: Path, epoch: int | None) -> tuple[TrainConfig, dict[str,
     return cfg, checkpoint
 
 
-def policy_from_checkpoint(cfg: TrainConfig, checkpoint: dict[str, Any]) -> DDPG:
+def policy_from_checkpoint(cfg: TrainConfig, checkpoint: dict[str, Any]) -> GoalConditionedLearner:
     """The run's learner on the CPU with the checkpoint's networks and normalisers."""
     env = make_env(cfg.task)
     spec = env_spec(env)

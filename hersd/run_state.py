@@ -17,6 +17,7 @@ import torch
 
 from hersd.config import ConfigError, TrainConfig
 from hersd.ddpg import DDPG
+from hersd.learner import GoalConditionedLearner
 from hersd.envs import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.goal_envs import vectorised_reward
 from hersd.mep import EpisodePrioritizer
@@ -124,8 +125,8 @@ def discounting(cfg: TrainConfig, spec: EnvSpec) -> tuple[float, tuple[float, fl
 
 
 def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_range: tuple[float, float],
-               device: torch.device) -> DDPG:
-    """The learner of ``cfg.learner.name``; every learner has DDPG's interface (act, update, update_targets, ...).
+               device: torch.device) -> GoalConditionedLearner:
+    """The learner of ``cfg.learner.name``: a :class:`GoalConditionedLearner` (act, update, update_targets, ...).
     DDPG and TD3 clip target Q to ``q_range``; SAC's soft target is not clipped (hersd/sac.py)."""
     q_low, q_high = q_range
     sizes = (spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_low, device)

@@ -25,22 +25,23 @@ import numpy as np
 import torch
 
 from hersd.config import DDPGConfig, SACConfig
-from hersd.ddpg import DDPG, RunningNormalizer, UpdateStats, mlp
+from hersd.learner import GoalConditionedLearner, UpdateStats, frozen_q, mlp
 from hersd.replay import TransitionBatch
 
 LOG_STD_RANGE = (-20.0, 2.0)
 
 
-class SAC(DDPG):
-    """A squashed-Gaussian actor, twin critics and a learnt temperature; DDPG's normalisers and inputs."""
+class SAC(GoalConditionedLearner):
+    """A squashed-Gaussian actor, twin critics and a learnt temperature, on the shared input normalisers."""
+
+    PARTS = ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
+             "obs_norm", "goal_norm")
 
     def __init__(self, cfg: DDPGConfig, sac: SACConfig, obs_dim: int, goal_dim: int, action_dim: int,
                  max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
         # q_min is taken for the learners' common signature; SAC's soft target is not clipped.
-        self.cfg, self.max_action, self.gamma, self.device = cfg, max_action, gamma, device
+        super().__init__(cfg, obs_dim, goal_dim, max_action, gamma, device)
         self.action_dim = action_dim
-        self.obs_norm = RunningNormalizer(obs_dim, cfg.norm_eps, cfg.clip_norm, device)
-        self.goal_norm = RunningNormalizer(goal_dim, cfg.norm_eps, cfg.clip_norm, device)
         in_dim = obs_dim + goal_dim
         self.actor = mlp(in_dim, 2 * action_dim, cfg.hidden_layers, cfg.hidden_units).to(device)
         self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
@@ -113,9 +114,7 @@ class SAC(DDPG):
         critic_loss = torch.mean(torch.square(target_q - q)) + torch.mean(torch.square(target_q - self.critic2(critic_inputs)))
         policy_action, log_prob = self.sample(inputs)
         policy_inputs = torch.cat([inputs, policy_action], dim=1)
-        frozen = [{name: p.detach() for name, p in net.named_parameters()} for net in (self.critic, self.critic2)]
-        policy_q = torch.minimum(torch.func.functional_call(self.critic, frozen[0], (policy_inputs,)),
-                                 torch.func.functional_call(self.critic2, frozen[1], (policy_inputs,)))
+        policy_q = torch.minimum(frozen_q(self.critic, policy_inputs), frozen_q(self.critic2, policy_inputs))
         alpha = self.log_alpha.exp().detach()
         actor_loss = torch.mean(alpha * log_prob - policy_q)
         self.optimizer.zero_grad(set_to_none=True)
@@ -129,20 +128,15 @@ class SAC(DDPG):
         return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item(),
                            entropy=-log_prob.detach().mean().item())
 
-    @torch.no_grad()
     def update_targets(self) -> None:
         """Polyak-move both critics' targets (SAC has no actor target)."""
-        for online, target in ((self.critic, self.critic_target), (self.critic2, self.critic2_target)):
-            torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), 1.0 - self.cfg.polyak)
+        self.polyak((self.critic, self.critic_target), (self.critic2, self.critic2_target))
 
     def state_dict(self) -> dict:
-        return {**{name: getattr(self, name).state_dict() for name in
-                   ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
-                    "obs_norm", "goal_norm")}, "log_alpha": self.log_alpha.detach().clone()}
+        return {**super().state_dict(), "log_alpha": self.log_alpha.detach().clone()}
 
     def load_state_dict(self, state: dict) -> None:
         state = dict(state)
         with torch.no_grad():
             self.log_alpha.copy_(state.pop("log_alpha"))
-        for name, value in state.items():
-            getattr(self, name).load_state_dict(value)
+        super().load_state_dict(state)

@@ -18,26 +18,43 @@ from __future__ import annotations
 
 import copy
 
+import numpy as np
 import torch
 
 from hersd.config import DDPGConfig, TD3Config
-from hersd.ddpg import DDPG, UpdateStats, mlp
+from hersd.learner import GoalConditionedLearner, UpdateStats, frozen_q, mlp, noisy_action
 from hersd.replay import TransitionBatch
 
 
-class TD3(DDPG):
-    """DDPG's actor, normalisers and exploration with twin critics, smoothed targets, delayed actor steps."""
+class TD3(GoalConditionedLearner):
+    """DDPG's actor, inputs and exploration with twin critics, smoothed targets, delayed actor steps."""
+
+    PARTS = ("actor", "critic", "actor_target", "critic_target", "optimizer", "obs_norm", "goal_norm",
+             "critic2", "critic2_target")
 
     def __init__(self, cfg: DDPGConfig, td3: TD3Config, obs_dim: int, goal_dim: int, action_dim: int,
                  max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu"),
                  q_max: float = 0.0):
-        super().__init__(cfg, obs_dim, goal_dim, action_dim, max_action, gamma, q_min, device, q_max)
-        self.td3 = td3
-        self.critic2 = mlp(obs_dim + goal_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
+        super().__init__(cfg, obs_dim, goal_dim, max_action, gamma, device)
+        self.td3, self.q_min, self.q_max = td3, q_min, q_max
+        in_dim = obs_dim + goal_dim  # networks made in DDPG's order (actor, critic, then critic2): one torch RNG stream
+        self.actor = mlp(in_dim, action_dim, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
+        self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.critic2 = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
         self.critic2_target = copy.deepcopy(self.critic2).requires_grad_(False)
-        self.optimizer.add_param_group({"params": self.critic2.parameters(), "lr": cfg.critic_lr})
+        self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
+                                           {"params": self.critic.parameters(), "lr": cfg.critic_lr},
+                                           {"params": self.critic2.parameters(), "lr": cfg.critic_lr}], fused=True)
         self.update_count = 0  # updates taken; the actor steps when update_count % policy_delay == 0 before it
         self.last_actor_loss = 0.0
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
+        """DDPG's acting: tanh(actor) * max_action, with explore through :func:`hersd.learner.noisy_action`."""
+        action = (torch.tanh(self.actor(self._inputs(obs, goal))) * self.max_action).cpu().numpy().astype(np.float64)
+        return noisy_action(action, self.cfg, self.max_action, rng) if explore else action
 
     @torch.no_grad()
     def target_q(self, next_inputs: torch.Tensor, reward: torch.Tensor) -> torch.Tensor:
@@ -62,8 +79,7 @@ class TD3(DDPG):
         self.update_count += 1
         if actor_step:
             policy_action = torch.tanh(self.actor(inputs))
-            frozen = {name: p.detach() for name, p in self.critic.named_parameters()}
-            policy_q = torch.func.functional_call(self.critic, frozen, (torch.cat([inputs, policy_action], dim=1),))
+            policy_q = frozen_q(self.critic, torch.cat([inputs, policy_action], dim=1))
             actor_loss = -policy_q.mean() + self.cfg.action_l2 * torch.mean(torch.square(policy_action))
             self.last_actor_loss = actor_loss.item()
             loss = loss + actor_loss
@@ -73,16 +89,13 @@ class TD3(DDPG):
         q = q.detach()
         return UpdateStats(critic_loss, self.last_actor_loss, q.mean().item(), torch.square(q).mean().item())
 
-    @torch.no_grad()
     def update_targets(self) -> None:
         """Polyak-move the actor's and both critics' targets."""
-        super().update_targets()
-        torch._foreach_lerp_(list(self.critic2_target.parameters()), list(self.critic2.parameters()),
-                             1.0 - self.cfg.polyak)
+        self.polyak((self.actor, self.actor_target), (self.critic, self.critic_target),
+                    (self.critic2, self.critic2_target))
 
     def state_dict(self) -> dict:
-        return {**super().state_dict(), "critic2": self.critic2.state_dict(),
-                "critic2_target": self.critic2_target.state_dict(),
+        return {**super().state_dict(),
                 "counters": {"update_count": self.update_count, "last_actor_loss": self.last_actor_loss}}
 
     def load_state_dict(self, state: dict) -> None:

@@ -24,7 +24,7 @@ import torch
 
 import hersd
 from hersd.config import TrainConfig
-from hersd.ddpg import DDPG, UpdateStats
+from hersd.learner import GoalConditionedLearner, UpdateStats
 from hersd.envs import step_success
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
 from hersd.render import RenderError, render_policy, renders_at
@@ -63,7 +63,7 @@ def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
 
 
 # --------------------------------------------------------------------------- the steps of an epoch
-def run_episodes(envs: list, agent: DDPG, horizon: int, explore: bool,
+def run_episodes(envs: list, agent: GoalConditionedLearner, horizon: int, explore: bool,
                  rng: np.random.Generator) -> tuple[Episodes, np.ndarray]:
     """One episode in each env, stepped in lockstep -> (Episodes of n = len(envs), success (n,) bool at the
     last step). Each step's goal is the desired goal of its observation (constant in Fetch, Hand and the
