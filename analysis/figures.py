@@ -326,6 +326,7 @@ def _draw_composition(task: str, shares: pd.DataFrame, shown: list[str], marked:
         axis.set_ylim(0, 1)
         if panel["epoch"].max() > panel["epoch"].min():
             axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
+    axes[0].set_yticks([0, 0.5, 1])  # shared by every panel: three ticks instead of six to draw in each
     _label_outer(axes, "share of the minibatch")
     _figure_legend(figure, axes[:1], LEGEND_WIDTH, reverse=True, fontsize=9)
     return figure
