@@ -358,6 +358,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CampaignError as err:
         print(f"hersd-campaign: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader left (`hersd-campaign status | head`): stop quietly, as cat does
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 141
 
 
 if __name__ == "__main__":

@@ -180,3 +180,13 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, arguments, message):
         code = exited.code
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and message in err
+
+
+def test_status_into_a_reader_that_stops_early_ends_quietly(tmp_path):
+    """`hersd-campaign status | head -1`: the reader closes the pipe early; no traceback."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # a reader already gone: the first write meets a closed pipe
+    status = subprocess.run([sys.executable, "-m", "sweeps.campaign", "status", "--results-dir", str(tmp_path)],
+                            stdout=write_end, stderr=subprocess.PIPE, text=True)
+    os.close(write_end)
+    assert status.returncode == 141 and status.stderr == ""
