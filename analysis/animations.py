@@ -1,5 +1,6 @@
-"""The policy animations of the report: per task, each configuration's GIF from its seed nearest the
-median final success, at matched epochs, placed after the task's learning curves.
+"""The policy animations of the report: per task, each configuration's GIFs from its seed nearest the
+median final success, side by side at matched epochs (one row per epoch, up to MAX_EPOCHS_SHOWN rows),
+placed after the task's learning curves.
 
 Training (``render_every``) and ``hersd-render`` write ``<run dir>/policy/epoch_<k>.gif``
 (:func:`hersd.runstore.policy_animations` finds them); this module only finds, chooses and places
@@ -13,6 +14,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from analysis.metrics import Analysis, final_success
@@ -20,6 +22,7 @@ from hersd.runstore import policy_animations
 from hersd.tasks import task_title
 
 FOLDER = "animations"  # below the report's figures/ folder
+MAX_EPOCHS_SHOWN = 4  # rows of a task's block: the paper's 200 epochs rendered every 50 give 50, 100, 150, 200
 
 
 @dataclass
@@ -47,10 +50,20 @@ def _nearest_median(group: pd.DataFrame, gifs: dict[int, dict[int, Path]]) -> tu
     return order.iloc[0], median
 
 
+def shown_epochs(common: set[int]) -> list[int]:
+    """Up to MAX_EPOCHS_SHOWN of the epochs every chosen run has, evenly spread from the first to the
+    last, in order."""
+    epochs = sorted(common)
+    if len(epochs) <= MAX_EPOCHS_SHOWN:
+        return epochs
+    return [epochs[index] for index in np.linspace(0, len(epochs) - 1, MAX_EPOCHS_SHOWN).round().astype(int)]
+
+
 def choose_animations(analysis: Analysis, folder: Path) -> dict[str, list[Chosen]]:
-    """Per task (in the report's order), one :class:`Chosen` per configuration with animations, in the
-    configurations' order. The epoch is the latest that every one of them has; when they have none in
-    common, each shows its own latest."""
+    """Per task (in the report's order), the :class:`Chosen` GIFs row by row: one row per epoch shown
+    (:func:`shown_epochs` of those every chosen run has), in each row one per configuration with
+    animations, in the configurations' order. When the runs have no epoch in common, one row: each
+    configuration's own latest."""
     complete = analysis.curves[analysis.curves["complete"]]
     if complete.empty:
         return {}
@@ -63,11 +76,11 @@ def choose_animations(analysis: Analysis, folder: Path) -> dict[str, list[Chosen
         if not picks:
             continue
         common = set.intersection(*(set(gifs[row["run"]]) for _, (row, _) in picks))
-        chosen[task] = []
-        for config, (row, median) in picks:
-            epoch = max(common) if common else max(gifs[row["run"]])
-            chosen[task].append(Chosen(task, str(config), int(row["seed"]), float(row["final"]), median, epoch,
-                                       gifs[row["run"]][epoch]))
+        own_latest = [max(gifs[row["run"]]) for _, (row, _) in picks]
+        rows = [[epoch] * len(picks) for epoch in shown_epochs(common)] or [own_latest]
+        chosen[task] = [Chosen(task, str(config), int(row["seed"]), float(row["final"]), median, epoch,
+                               gifs[row["run"]][epoch])
+                        for epochs in rows for (config, (row, median)), epoch in zip(picks, epochs)]
     return chosen
 
 
@@ -78,21 +91,25 @@ def file_name(index: int, chosen: Chosen) -> str:
 
 
 def animations_html(task: str, chosen: list[Chosen], sources: list[str]) -> str:
-    """The page's block for one task: each configuration's GIF (``sources[i]``: its path relative to the
-    page) with its caption, side by side."""
+    """The page's block for one task: ``chosen`` row by row (as :func:`choose_animations` orders them), each
+    configuration's GIF (``sources[i]``: its path relative to the page) with its caption, one row per epoch."""
+    per_row = len({item.config for item in chosen})
     epochs = sorted({item.epoch for item in chosen})
     shown = f"epoch {epochs[0]}" if len(epochs) == 1 else "epochs " + ", ".join(map(str, epochs))
-    cells = "".join(
+    cells = [
         f'<figure style="margin:0"><img alt="{html.escape(f"{item.config}, seed {item.seed}, epoch {item.epoch}")}" '
         f'src="{html.escape(source)}" width="240" height="180"><figcaption>{html.escape(item.config)}: seed '
         f"{item.seed}, epoch {item.epoch}<br>final success {item.final:.2f} (median {item.median:.2f})"
-        f"</figcaption></figure>" for item, source in zip(chosen, sources))
+        f"</figcaption></figure>" for item, source in zip(chosen, sources)]
+    row_style = "display:flex;flex-wrap:wrap;gap:1em;margin-bottom:1em"
+    rows = "".join(f'<div style="{row_style}">{"".join(cells[start:start + per_row])}</div>'
+                   for start in range(0, len(cells), per_row))
     caption = ("Two deterministic test episodes of the policy of each configuration's seed nearest its median "
-               "final success (complete runs with animations), at the latest epoch they all have; the bar at the "
-               "bottom turns green while the goal is reached. Files: figures/animations/.")
+               "final success (complete runs with animations), side by side at the epochs they all have (up to "
+               f"{MAX_EPOCHS_SHOWN}, one row each); the bar at the bottom turns green while the goal is reached. "
+               "Files: figures/animations/.")
     return (f'<figure id="animations_{html.escape(task)}"><h3>{html.escape(task_title(task))}: the policies, '
-            f'{shown}</h3><div style="display:flex;flex-wrap:wrap;gap:1em">{cells}</div>'
-            f"<figcaption>{caption}</figcaption></figure>")
+            f"{shown}</h3>{rows}<figcaption>{caption}</figcaption></figure>")
 
 
 def is_curves_of(figure_name: str, task: str) -> bool:
