@@ -43,8 +43,13 @@ SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "au
                    f"p_improve_{BASELINE}"]
 
 
+SMOOTHED_DECIMALS = 12  # far finer than any success rate (a fraction of test episodes), far coarser than float noise
+
+
 def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
-    """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1).
+    """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1), rounded to
+    SMOOTHED_DECIMALS: pandas' running sum leaves float noise (a window of exactly 25 of 50 came out as
+    0.49999999999999994), which would put the first epoch reaching 0.5 one window step late.
 
     ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, complete, epoch,
     success (raw), smoothed; sorted by run then epoch.
@@ -54,7 +59,7 @@ def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
     curves = epochs[["task", "config", "run", "seed", "complete", "epoch", "test_success"]].sort_values(["run", "epoch"])
     curves = curves.rename(columns={"test_success": "success"}).reset_index(drop=True)
     rolling = curves.groupby("run", sort=False)["success"].rolling(window, min_periods=1).mean()
-    curves["smoothed"] = rolling.to_numpy()
+    curves["smoothed"] = rolling.to_numpy().round(SMOOTHED_DECIMALS)
     return curves
 
 

@@ -191,6 +191,20 @@ def test_first_epoch_reaching_is_nan_when_never_reached():
     assert math.isnan(metrics.first_epoch_reaching(epochs, np.array([0.1, 0.2, 0.3]), 0.5))
 
 
+def test_a_smoothed_window_of_exactly_half_successes_reaches_half_at_that_epoch():
+    """The first 75 test successes of a FetchPush log (linear 0.25, seed 1) in twentieths (20 test
+    episodes): those of epochs 26-75 add up to 25.0, so the 50-epoch mean first reaches 0.5 at epoch 75
+    (pandas' running sum alone gives 0.49999999999999994 there, and epoch 76)."""
+    twentieths = [1, 3, 3, 2, 0, 1, 1, 0, 0, 2, 2, 1, 2, 2, 2, 1, 2, 0, 0, 1, 1, 0, 4, 1, 3, 1, 4, 2, 2, 1, 1,
+                  3, 6, 1, 3, 2, 3, 4, 1, 5, 3, 3, 7, 5, 7, 6, 8, 7, 8, 11, 11, 10, 10, 13, 12, 15, 14, 15,
+                  13, 19, 17, 17, 15, 19, 18, 18, 17, 17, 17, 19, 18, 19, 18, 17, 18]
+    epochs = pd.DataFrame({"task": "push", "config": "linear b1=0.25", "run": 0, "seed": 1, "complete": False,
+                           "epoch": np.arange(1, 76), "test_success": np.array(twentieths) / 20})
+    curve = metrics.smoothed_curves(epochs, window=50)
+    assert sum(twentieths[25:]) == 500 and curve["smoothed"].iloc[-1] == 0.5
+    assert metrics.first_epoch_reaching(curve["epoch"].to_numpy(), curve["smoothed"].to_numpy(), 0.5) == 75
+
+
 def test_bootstrap_interval_is_seeded_and_stratified():
     values = [np.random.default_rng(7).uniform(size=12)]
     first = metrics.iqm_interval(values, seed=3)
