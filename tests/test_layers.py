@@ -109,3 +109,16 @@ def test_no_function_is_longer_than_60_lines_without_a_reason():
                     if length > 60 and "long:" not in lines[node.lineno - 1]:
                         too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({length} lines)")
     assert not too_long, too_long
+
+
+def test_the_architecture_doc_names_every_module_and_only_modules_that_exist():
+    """docs/ARCHITECTURE.md matches the tree: every module of a layer is named there (as `name.py`),
+    and every `*.py` it names exists (a path as given, a bare name somewhere in the layers)."""
+    doc = (ROOT / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"`([\w/]+\.py)`", doc))
+    modules = [path for package in LAYERS for path in (ROOT / package).rglob("*.py") if path.name != "__init__.py"]
+    unnamed = [str(path.relative_to(ROOT)) for path in modules if path.name not in {Path(n).name for n in named}]
+    assert not unnamed, f"modules missing from docs/ARCHITECTURE.md: {unnamed}"
+    names = {path.name for path in modules}
+    ghosts = [n for n in named if not ((ROOT / n).exists() if "/" in n else n in names)]
+    assert not ghosts, f"docs/ARCHITECTURE.md names modules that do not exist: {ghosts}"
