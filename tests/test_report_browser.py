@@ -113,3 +113,11 @@ def test_a_missing_image_fails_the_check(browser, report):
         check_page(browser, report)
     shutil.copyfile(next((report.parent / "figures/animations").glob("push_0_*.gif")), gone)
     check_page(browser, report)  # back in place: the same page passes
+
+
+def test_the_committed_report_loads_in_the_browser_with_its_policy_animations(browser):
+    """results/report/index.html as committed (`hersd-report results/`): every figure and animation loads,
+    every table is there, and the FetchPush campaign's policies are among the images."""
+    seen = check_page(browser, Path(__file__).resolve().parent.parent / "results" / "report" / "index.html")
+    animations = [image["src"] for image in seen["images"] if image["src"].startswith("figures/animations/push_")]
+    assert len(animations) >= 2, seen["images"]
