@@ -49,7 +49,7 @@ SMOOTHED_DECIMALS = 12  # far finer than any success rate (a fraction of test ep
 def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
     """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1), rounded to
     SMOOTHED_DECIMALS: pandas' running sum leaves float noise (a window of exactly 25 of 50 came out as
-    0.49999999999999994), which would put the first epoch reaching 0.5 one window step late.
+    0.49999999999999994), which would put the first epoch reaching 0.5 one epoch late.
 
     ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, complete, epoch,
     success (raw), smoothed; sorted by run then epoch.
