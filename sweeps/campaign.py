@@ -10,6 +10,10 @@ another they make every run of the campaign. Subcommands (``--results-dir`` defa
 - ``status`` one line per planned run: complete, ``epoch N of K`` or new, and what is training;
 - ``land``   copies each planned run's ``run.mcap`` into the repository's results folder.
 
+On a fresh machine (or after the results folder was lost) ``run`` first copies in each planned
+run that ``land`` already put in the repository complete (:func:`reuse_landed`), so no complete
+run is trained twice.
+
 Planned runs are found the way hersd-sweep finds them: each sweep's grid is expanded by
 Hydra's basic sweeper and every job composed into its TrainConfig, whose
 :func:`hersd.runstore.run_dir` is the run's directory. The run store skips complete runs and
@@ -31,7 +35,7 @@ from typing import Callable, Sequence
 from hersd.compose import CONFIG_MODULE, explain_config_error, group_options
 from hersd.config import TrainConfig
 from hersd.runlog import LOG_NAME, RunLogError, read_records
-from hersd.runstore import LOCK_NAME, policy_animations, run_dir
+from hersd.runstore import LOCK_NAME, config_hash, policy_animations, run_dir, run_state
 from sweeps.hydra_private import basic_sweeper_class, grid_overrides
 from sweeps.launch import job_train_config, register_schemas
 
@@ -61,8 +65,15 @@ class PlannedRun:
 
     stage: int  # 1-based
     relative: Path  # e.g. push/her/constant-0.8/seed1-0c03aeaf
-    seed: int
-    epochs: int
+    config: TrainConfig
+
+    @property
+    def seed(self) -> int:
+        return self.config.seed
+
+    @property
+    def epochs(self) -> int:
+        return self.config.epochs
 
     @property
     def arm(self) -> str:
@@ -120,7 +131,7 @@ def plan_runs(stages: list[Stage], results_dir: Path) -> list[PlannedRun]:
                     for job in sweep_jobs([*sweep, f"results_dir={results_dir}"], compose):
                         cfg = job_config(job, compose, composed)
                         relative = run_dir(cfg).relative_to(results_dir)
-                        planned.setdefault(relative, PlannedRun(number, relative, cfg.seed, cfg.epochs))
+                        planned.setdefault(relative, PlannedRun(number, relative, cfg))
     except Exception as err:  # noqa: BLE001 - Hydra's composition errors become one line
         raise CampaignError(f"the campaign's sweeps do not compose: {explain_config_error(err)}") from None
     return list(planned.values())
@@ -258,8 +269,8 @@ def copy_atomically(source: Path, target: Path) -> bool:
     return True
 
 
-def start(campaign: str, results_dir: Path) -> int:
-    """Start the campaign in a detached process unless one runs for ``results_dir`` already."""
+def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
+    """Start the campaign (:func:`run`) in a detached process unless one runs for ``results_dir`` already."""
     load_campaign(campaign)  # an unknown campaign is an error here, not in the log
     pid = campaign_pid(results_dir)
     log = results_dir / CAMPAIGN_LOG
@@ -273,7 +284,8 @@ def start(campaign: str, results_dir: Path) -> int:
         return 1
     make_folder(results_dir)
     with open(log, "a") as output:
-        process = subprocess.Popen([*RUNNER, "--campaign", campaign, "--results-dir", str(results_dir)],
+        process = subprocess.Popen([*RUNNER, "--campaign", campaign, "--results-dir", str(results_dir),
+                                    "--landed", str(landed.absolute())],
                                    stdin=subprocess.DEVNULL, stdout=output, stderr=subprocess.STDOUT,
                                    start_new_session=True)
     (results_dir / PID_NAME).write_text(f"{process.pid}\n")
@@ -282,8 +294,9 @@ def start(campaign: str, results_dir: Path) -> int:
     return 0
 
 
-def run(campaign: str, results_dir: Path) -> int:
-    """Run the stages' sweeps one after another in this process; exit 1 if any sweep failed."""
+def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
+    """Run the stages' sweeps one after another in this process, after reusing the complete
+    runs landed in ``landed``; exit 1 if any sweep failed."""
     stages = load_campaign(campaign)
     pid = campaign_pid(results_dir)
     if pid and pid != os.getpid():
@@ -293,6 +306,10 @@ def run(campaign: str, results_dir: Path) -> int:
     (results_dir / PID_NAME).write_text(f"{os.getpid()}\n")
     failed = []
     try:
+        reused = reuse_landed(plan_runs(stages, results_dir), results_dir, landed)
+        if reused:
+            _say(f"{len(reused)} complete run(s) landed in {landed} reused, not trained again: "
+                 + ", ".join(str(run.relative) for run in reused))
         for number, stage in enumerate(stages, 1):
             for sweep in stage.sweeps:
                 command = [*sweep, f"results_dir={results_dir}"]
@@ -305,6 +322,28 @@ def run(campaign: str, results_dir: Path) -> int:
     _say(f"campaign {campaign} finished" + (f"; failed: {'; '.join(failed)} (hersd-campaign start retries them)"
                                             if failed else ": every stage done"))
     return 1 if failed else 0
+
+
+def reuse_landed(plan: list[PlannedRun], results_dir: Path, landed: Path) -> list[PlannedRun]:
+    """Copy into ``results_dir`` the log and animations of each planned run that is new there
+    (no log, no checkpoint) and complete in ``landed``: its complete marker, the plan's number
+    of epochs and a config whose hash is the one in its folder's name. Returns the runs copied."""
+    reused = []
+    for run in plan:
+        source, target = landed / run.relative, results_dir / run.relative
+        if (target / LOG_NAME).exists() or run_state(target) != "new" or not (source / LOG_NAME).exists():
+            continue
+        try:
+            records = read_records(source / LOG_NAME)
+        except RunLogError:
+            continue
+        if not (records.complete and len(records.records) == run.epochs
+                and run.relative.name.endswith(f"-{config_hash(records.meta['config'])}")):
+            continue
+        for path in [source / LOG_NAME, *policy_animations(source).values()]:
+            copy_atomically(path, target / path.relative_to(source))
+        reused.append(run)
+    return reused
 
 
 def _say(line: str) -> None:
@@ -345,6 +384,10 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
         if name == "land":
             command.add_argument("--into", type=Path, default=DEFAULT_INTO,
                                  help="the folder mirroring the results dir (default: results, the repository's)")
+        if name in ("start", "run"):
+            command.add_argument("--landed", type=Path, default=DEFAULT_INTO,
+                                 help="complete runs landed here are copied in, not trained again "
+                                      "(default: results, the repository's)")
     return parser.parse_args(argv)
 
 
@@ -354,7 +397,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "land":
             return land(args.campaign, results_dir, args.into)
-        return {"start": start, "status": status, "run": run}[args.command](args.campaign, results_dir)
+        if args.command == "status":
+            return status(args.campaign, results_dir)
+        return {"start": start, "run": run}[args.command](args.campaign, results_dir, args.landed)
     except CampaignError as err:
         print(f"hersd-campaign: error: {err}", file=sys.stderr)
         return 2

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from unittest import mock
 
@@ -102,6 +103,33 @@ def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path,
     assert len(read_records(into / runs[1].relative / "run.mcap").records) == 5
 
 
+def test_run_reuses_the_complete_runs_landed_in_the_repository_and_nothing_else(plan, tmp_path, monkeypatch,
+                                                                                capfd):
+    """A fresh machine: complete runs already in the repository's results folder are copied in
+    (log and animations) rather than trained again; a run under way, an unfinished landed log
+    and a log whose config does not match its folder are left to the sweeps."""
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", "pass"])
+    results, landed, runs = tmp_path / "results", tmp_path / "repo" / "results", plan
+    with mock.patch("os.fsync"):
+        reusable = write_run(landed / runs[0].relative, runs[0].config, np.linspace(0, 1, 200))
+        write_run(landed / runs[1].relative, runs[1].config, np.linspace(0, 1, 200))
+        write_run(landed / runs[2].relative, runs[2].config, np.linspace(0, 1, 3), complete=False)
+        write_run(landed / runs[3].relative, replace(runs[3].config, seed=9), np.linspace(0, 1, 200))
+    animation = policy_animation(reusable.parent, 200)
+    animation.parent.mkdir()
+    animation.write_bytes(b"GIF89a a policy")
+    under_way = write_log(results / runs[1].relative, 3, complete=False)
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(landed)]) == 0
+    assert f"1 complete run(s) landed in {landed} reused, not trained again: {runs[0].relative}" \
+        in capfd.readouterr().out
+    assert (results / runs[0].relative / "run.mcap").read_bytes() == reusable.read_bytes()
+    assert policy_animation(results / runs[0].relative, 200).read_bytes() == b"GIF89a a policy"
+    assert len(read_records(under_way).records) == 3
+    assert not (results / runs[2].relative).exists() and not (results / runs[3].relative).exists()
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(landed)]) == 0
+    assert "reused" not in capfd.readouterr().out  # once copied, a run is the results folder's own
+
+
 def test_start_detaches_one_campaign_and_refuses_a_second(tmp_path, monkeypatch, capsys):
     # The runner replaced by a sleeper whose command line names the campaign module, as the runner's does.
     monkeypatch.setattr(campaign, "RUNNER", [sys.executable, "-c", "import time; time.sleep(120)", "sweeps.campaign"])
@@ -114,6 +142,7 @@ def test_start_detaches_one_campaign_and_refuses_a_second(tmp_path, monkeypatch,
         pid = int((results / campaign.PID_NAME).read_text())
         assert f"started in the background: pid {pid}, log {results / 'campaign.log'}" in capsys.readouterr().out
         assert started[0].pid == pid and os.getsid(pid) == pid  # detached: a session of its own
+        assert started[0].args[-2:] == ["--landed", str(Path("results").absolute())]
         assert campaign.main(["start", "--results-dir", str(results)]) == 0
         assert f"campaign already running for {results} (pid {pid})" in capsys.readouterr().out
         assert len(started) == 1
@@ -155,7 +184,7 @@ def test_start_leaves_runs_being_trained_by_another_process_alone(plan, tmp_path
 def test_the_runner_runs_every_sweep_in_stage_order(tmp_path, monkeypatch, capfd):
     monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", "import sys; print('sweep', *sys.argv[1:])"])
     results = tmp_path / "results"
-    assert campaign.main(["run", "--results-dir", str(results)]) == 0
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none")]) == 0
     out = capfd.readouterr().out
     sweeps = [line.removeprefix("sweep ") for line in out.splitlines() if line.startswith("sweep ")]
     expected = [" ".join([*sweep, f"results_dir={results}"]) for stage in campaign.load_campaign("push_paper")
