@@ -58,18 +58,18 @@ def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[st
 
 
 def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, complete: bool = True,
-              **fields: np.ndarray) -> Path:
+              meta: dict | None = None, **fields: np.ndarray) -> Path:
     """Write ``<folder>/run.mcap`` for ``config`` with the given test-success curve; returns its path.
 
     ``complete`` marks the run finished (the curve should then have config.epochs values);
     ``fields`` replace epoch fields of :func:`epoch_records` (name -> values, shape like the curve),
-    e.g. ``share_hindsight=np.full(n, 0.8)``.
+    e.g. ``share_hindsight=np.full(n, 0.8)``; ``meta`` replaces metadata fields, e.g. ``command``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     meta = {"run_id": config_hash(config), "config": dataclasses.asdict(config), "seed": config.seed,
             "versions": {"hersd": "synthetic"}, "git_commit": None, "command": "analysis.synthetic",
-            "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0}
+            "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0, **(meta or {})}
     writer = RunLogWriter(folder / LOG_NAME, meta)
     records = epoch_records(config, test_success)
     for index, record in enumerate(records):

@@ -8,7 +8,9 @@ another they make every run of the campaign. Subcommands (``--results-dir`` defa
   ``<DIR>/campaign.log``, and returns at once; a campaign already running for DIR is left alone;
 - ``run``    the same in the foreground (what ``start`` runs);
 - ``status`` one line per planned run: complete, ``epoch N of K`` or new, and what is training;
-- ``land``   copies each planned run's ``run.mcap`` into the repository's results folder.
+- ``land``   copies each planned run's ``run.mcap`` into the repository's results folder;
+- ``import`` checks logs of the campaign made on another machine (``../shared/campaign``) and
+  copies those that pass (:func:`import_logs`) into the same folder.
 
 On a fresh machine (or after the results folder was lost) ``run`` first copies in each planned
 run that ``land`` already put in the repository complete (:func:`reuse_landed`), so no complete
@@ -34,7 +36,7 @@ from typing import Callable, Sequence
 
 from hersd.compose import CONFIG_MODULE, explain_config_error, group_options
 from hersd.config import TrainConfig
-from hersd.runlog import LOG_NAME, RunLogError, read_records
+from hersd.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 from hersd.runstore import LOCK_NAME, config_hash, policy_animations, run_dir, run_state
 from sweeps.hydra_private import basic_sweeper_class, grid_overrides
 from sweeps.launch import job_train_config, register_schemas
@@ -43,6 +45,8 @@ GROUP = "campaign"  # conf/campaign/<name>.yaml
 DEFAULT_CAMPAIGN = "push_paper"
 DEFAULT_RESULTS_DIR = Path.home() / "hersd-campaign"
 DEFAULT_INTO = Path("results")
+DEFAULT_SOURCE = Path("../shared/campaign")  # logs of the campaign made on other machines, beside the repository
+PROJECT_COMMANDS = ("hersd-sweep", "hersd-train")  # what made an importable log
 PID_NAME = "campaign.pid"
 CAMPAIGN_LOG = "campaign.log"
 RUNNER = [sys.executable, "-m", "sweeps.campaign", "run"]  # what ``start`` detaches; its command line names this module
@@ -231,22 +235,24 @@ def status(campaign: str, results_dir: Path) -> int:
 
 def land(campaign: str, results_dir: Path, into: Path) -> int:
     """Copy every planned run's log (complete or not) and its policy animations to the same
-    relative paths below ``into``."""
+    relative paths below ``into``; a complete log there is never replaced by an unfinished one
+    (a run imported from another machine that this campaign is training as well)."""
     plan = plan_runs(load_campaign(campaign), results_dir)
     changed = []
     for run in plan:
         source_dir, target_dir = results_dir / run.relative, into / run.relative
         if not (source_dir / LOG_NAME).exists():
             continue
-        copied = copy_atomically(source_dir / LOG_NAME, target_dir / LOG_NAME)
-        print(f"{'landed' if copied else 'unchanged':<9} {target_dir / LOG_NAME}  "
-              f"{progress(target_dir / LOG_NAME, run.epochs)}")
-        changed += [target_dir / LOG_NAME] if copied else []
-        for gif in policy_animations(source_dir).values():
-            target = target_dir / gif.relative_to(source_dir)
-            if copy_atomically(gif, target):
-                print(f"{'landed':<9} {target}")
-                changed.append(target)
+        state = progress(source_dir / LOG_NAME, run.epochs)
+        if state != "complete" and progress(target_dir / LOG_NAME, run.epochs) == "complete":
+            print(f"{'kept':<9} {target_dir / LOG_NAME}  complete (the campaign's copy: {state})")
+            continue
+        written, log = copy_run(source_dir, target_dir), target_dir / LOG_NAME
+        print(f"{'landed' if log in written else 'unchanged':<9} {log}  {progress(log, run.epochs)}")
+        for path in written:
+            if path != log:
+                print(f"{'landed':<9} {path}")
+        changed += written
     print(f"{len(changed)} file(s) landed in {into}" + ("; commit them with:\n  git add -- "
                                                          + " ".join(shlex.quote(str(p)) for p in changed)
                                                          if changed else ""))
@@ -326,24 +332,86 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
 
 def reuse_landed(plan: list[PlannedRun], results_dir: Path, landed: Path) -> list[PlannedRun]:
     """Copy into ``results_dir`` the log and animations of each planned run that is new there
-    (no log, no checkpoint) and complete in ``landed``: its complete marker, the plan's number
-    of epochs and a config whose hash is the one in its folder's name. Returns the runs copied."""
+    (no log, no checkpoint) and complete in ``landed`` (:func:`complete_records`). Returns the runs copied."""
     reused = []
     for run in plan:
         source, target = landed / run.relative, results_dir / run.relative
         if (target / LOG_NAME).exists() or run_state(target) != "new" or not (source / LOG_NAME).exists():
             continue
         try:
-            records = read_records(source / LOG_NAME)
-        except RunLogError:
+            complete_records(source / LOG_NAME, run)
+        except RejectedLog:
             continue
-        if not (records.complete and len(records.records) == run.epochs
-                and run.relative.name.endswith(f"-{config_hash(records.meta['config'])}")):
-            continue
-        for path in [source / LOG_NAME, *policy_animations(source).values()]:
-            copy_atomically(path, target / path.relative_to(source))
+        copy_run(source, target)
         reused.append(run)
     return reused
+
+
+class RejectedLog(Exception):
+    """A log that is not a complete log of the planned run; the message says why."""
+
+
+def complete_records(log: Path, run: PlannedRun) -> RunRecords:
+    """``log``'s records if it is a complete log of ``run``: readable, its complete marker, the
+    plan's number of epochs and a config whose hash is the planned run's; else RejectedLog."""
+    try:
+        records = read_records(log)
+    except RunLogError as err:
+        raise RejectedLog(f"unreadable ({str(err).removeprefix(f'{log}: ')})") from None
+    if not records.complete:
+        raise RejectedLog(f"not complete (epoch {len(records.records)} of {run.epochs})")
+    if len(records.records) != run.epochs:
+        raise RejectedLog(f"{len(records.records)} epochs, the plan has {run.epochs}")
+    logged, planned = config_hash(records.meta["config"]), config_hash(run.config)
+    if logged != planned:
+        raise RejectedLog(f"its config is not the plan's (hash {logged}, the plan's {planned})")
+    return records
+
+
+def copy_run(source: Path, target: Path) -> list[Path]:
+    """Copy a run directory's log and policy animations (never a checkpoint) from ``source`` to
+    ``target`` (:func:`copy_atomically`); returns the files written (those that changed)."""
+    return [target / path.relative_to(source) for path in [source / LOG_NAME, *policy_animations(source).values()]
+            if copy_atomically(path, target / path.relative_to(source))]
+
+
+def import_logs(campaign: str, source: Path, into: Path) -> int:
+    """Take in the logs of this campaign made on another machine: each ``run.mcap`` below ``source``
+    whose folder is a planned run's (``.../push/her/<arm>/seed<N>-<hash>``) and which is a complete
+    log of it (:func:`complete_records`), made by ``hersd-sweep`` or ``hersd-train``, is copied with
+    its animations to the same path below ``into``, unless a complete log of the run is there
+    already. Prints one line per log found: imported with its provenance, or why not."""
+    if not source.is_dir():
+        raise CampaignError(f"no folder {source}; pass the folder holding the other machine's logs")
+    plan = plan_runs(load_campaign(campaign), Path("/campaign"))
+    logs = sorted(source.rglob(LOG_NAME))
+    imported = []
+    for log in logs:
+        run = next((run for run in plan if log.parent.as_posix().endswith("/" + run.relative.as_posix())), None)
+        try:
+            if run is None:
+                raise RejectedLog(f"not a run of campaign {campaign} (its folder names no planned run)")
+            meta = complete_records(log, run).meta
+            command = str(meta.get("command") or "")
+            if command.split(" ", 1)[0] not in PROJECT_COMMANDS:
+                raise RejectedLog(f"not made by {' or '.join(PROJECT_COMMANDS)} (command {command!r})")
+            target = into / run.relative
+            if progress(target / LOG_NAME, run.epochs) == "complete" \
+                    and (target / LOG_NAME).read_bytes() != log.read_bytes():
+                raise RejectedLog(f"kept {target / LOG_NAME}, a complete log of the run already there")
+        except RejectedLog as reason:
+            print(f"rejected  {log}: {reason}")
+            continue
+        written = copy_run(log.parent, target)
+        imported += written
+        machine = meta.get("machine") or {}
+        print(f"{'imported' if written else 'unchanged':<9} {target / LOG_NAME}  from {log}: made on {machine.get('cpu_model', 'an unrecorded CPU')} "
+              f"({machine.get('cpu_cores', '?')} cores), commit {meta.get('git_commit')}, "
+              f"started {meta.get('start_time')}: {command}")
+    print(f"{len(logs)} log(s) found in {source}; {len(imported)} file(s) written to {into}"
+          + ("; commit them with:\n  git add -- " + " ".join(shlex.quote(str(p)) for p in imported)
+             if imported else ""))
+    return 0
 
 
 def _say(line: str) -> None:
@@ -371,17 +439,23 @@ class _OneLineParser(argparse.ArgumentParser):
 def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = _OneLineParser(prog="hersd-campaign", description="A campaign of sweeps as one resumable command.")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser,
-                                     metavar="{start,status,land,run}")
+                                     metavar="{start,status,land,import,run}")
     for name, text in (("start", "start or resume the campaign in the background"),
                        ("status", "one line per planned run: complete, epoch N of K, or new"),
                        ("land", "copy every planned run's run.mcap and animations into the results folder"),
+                       ("import", "check the campaign's logs made on another machine and copy those that "
+                                  "pass into the results folder"),
                        ("run", "run the campaign in the foreground (what start runs)")):
         command = commands.add_parser(name, help=text, description=text)
         command.add_argument("--campaign", default=DEFAULT_CAMPAIGN, help=f"conf/campaign/<name>.yaml "
                              f"(default {DEFAULT_CAMPAIGN})")
-        command.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR,
-                             help=f"where the runs are written (default {DEFAULT_RESULTS_DIR})")
-        if name == "land":
+        if name != "import":
+            command.add_argument("--results-dir", type=Path, default=DEFAULT_RESULTS_DIR,
+                                 help=f"where the runs are written (default {DEFAULT_RESULTS_DIR})")
+        if name == "import":
+            command.add_argument("source", nargs="?", type=Path, default=DEFAULT_SOURCE,
+                                 help=f"the folder holding them, searched recursively (default {DEFAULT_SOURCE})")
+        if name in ("land", "import"):
             command.add_argument("--into", type=Path, default=DEFAULT_INTO,
                                  help="the folder mirroring the results dir (default: results, the repository's)")
         if name in ("start", "run"):
@@ -393,8 +467,10 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse(argv)
-    results_dir = args.results_dir.expanduser().absolute()
     try:
+        if args.command == "import":
+            return import_logs(args.campaign, args.source, args.into)
+        results_dir = args.results_dir.expanduser().absolute()
         if args.command == "land":
             return land(args.campaign, results_dir, args.into)
         if args.command == "status":

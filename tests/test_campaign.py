@@ -103,6 +103,81 @@ def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path,
     assert len(read_records(into / runs[1].relative / "run.mcap").records) == 5
 
 
+def test_land_never_replaces_a_complete_log_with_an_unfinished_one(plan, tmp_path, capsys):
+    """A run imported complete from another machine and trained here as well: land keeps the complete log."""
+    results, into, runs = tmp_path / "results", tmp_path / "repo" / "results", plan
+    imported = write_log(into / runs[0].relative, 200, complete=True)
+    kept = imported.read_bytes()
+    write_log(results / runs[0].relative, 4, complete=False)
+    assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
+    out = capsys.readouterr().out
+    assert f"kept      {imported}  complete (the campaign's copy: epoch 4 of 200)" in out
+    assert "0 file(s) landed" in out and imported.read_bytes() == kept
+    write_log(results / runs[0].relative, 200, complete=True)  # finished here too: a complete log replaces it
+    assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
+    assert f"landed    {imported}  complete" in capsys.readouterr().out
+    assert imported.read_bytes() == (results / runs[0].relative / "run.mcap").read_bytes() != kept
+
+
+MADE_ELSEWHERE = {"command": "hersd-sweep task=push seed=0 schedule=constant +grid=push_paper seeds=3",
+                  "git_commit": "0123abc", "start_time": "2026-11-24T01:02:03+0000",
+                  "machine": {"cpu_model": "Other CPU", "cpu_cores": 8}}
+
+
+def test_import_takes_in_the_complete_logs_of_the_plan_made_elsewhere_and_nothing_else(plan, tmp_path, capsys):
+    """Logs found anywhere below the source folder: a complete log of a planned run made by hersd-sweep is
+    copied (with its animation) and its provenance printed; every other log is named with the reason."""
+    runs, source, into = plan, tmp_path / "shared" / "campaign", tmp_path / "repo" / "results"
+    other = source / "machine-b" / "results"  # any layout above the run folders
+    with mock.patch("os.fsync"):
+        good = write_run(other / runs[0].relative, runs[0].config, np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
+        unfinished = write_run(source / runs[1].relative, runs[1].config, np.linspace(0, 1, 3), complete=False,
+                               meta=MADE_ELSEWHERE)
+        other_config = write_run(source / runs[2].relative, replace(runs[2].config, seed=9),
+                                 np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
+        by_hand = write_run(source / runs[3].relative, runs[3].config, np.linspace(0, 1, 200))
+        short = write_run(source / runs[4].relative, runs[4].config, np.linspace(0, 1, 150), meta=MADE_ELSEWHERE)
+        unplanned = write_run(source / runs[0].relative.with_name("seed0-0badf00d"), runs[0].config,
+                              np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
+        twice = write_run(source / runs[5].relative, runs[5].config, np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
+        ours = write_run(into / runs[5].relative, runs[5].config, np.linspace(0, 0.5, 200))
+    damaged = source / runs[6].relative / "run.mcap"
+    damaged.parent.mkdir(parents=True)
+    damaged.write_bytes(b"not a log")
+    animation = policy_animation(good.parent, 200)
+    animation.parent.mkdir()
+    animation.write_bytes(b"GIF89a a policy")
+
+    assert campaign.main(["import", str(source), "--into", str(into)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert f"imported  {into / runs[0].relative / 'run.mcap'}  from {good}: made on Other CPU (8 cores), " \
+           f"commit 0123abc, started 2026-11-24T01:02:03+0000: {MADE_ELSEWHERE['command']}" in lines
+    assert f"rejected  {unfinished}: not complete (epoch 3 of 200)" in lines
+    assert any(line.startswith(f"rejected  {other_config}: its config is not the plan's (hash ") for line in lines)
+    assert f"rejected  {by_hand}: not made by hersd-sweep or hersd-train (command 'analysis.synthetic')" in lines
+    assert f"rejected  {short}: 150 epochs, the plan has 200" in lines
+    assert f"rejected  {unplanned}: not a run of campaign push_paper (its folder names no planned run)" in lines
+    assert f"rejected  {twice}: kept {ours}, a complete log of the run already there" in lines
+    assert any(line.startswith(f"rejected  {damaged}: unreadable (") for line in lines)
+    assert lines[-2] == f"8 log(s) found in {source}; 2 file(s) written to {into}; commit them with:"
+    written = sorted(p.relative_to(into) for p in into.rglob("*") if p.is_file())
+    assert written == sorted([runs[0].relative / "run.mcap", runs[0].relative / "policy" / "epoch_200.gif",
+                              runs[5].relative / "run.mcap"])
+    assert (into / runs[0].relative / "run.mcap").read_bytes() == good.read_bytes()
+
+    assert campaign.main(["import", str(source), "--into", str(into)]) == 0  # again: nothing new
+    out = capsys.readouterr().out
+    assert f"unchanged {into / runs[0].relative / 'run.mcap'}  from {good}" in out
+    assert out.splitlines()[-1] == f"8 log(s) found in {source}; 0 file(s) written to {into}"
+
+
+def test_import_from_a_missing_folder_is_one_line_and_exit_2(tmp_path, capsys):
+    assert campaign.main(["import", str(tmp_path / "none"), "--into", str(tmp_path / "results")]) == 2
+    assert capsys.readouterr().err == (f"hersd-campaign: error: no folder {tmp_path / 'none'}; "
+                                       "pass the folder holding the other machine's logs\n")
+    assert not (tmp_path / "results").exists()
+
+
 def test_run_reuses_the_complete_runs_landed_in_the_repository_and_nothing_else(plan, tmp_path, monkeypatch,
                                                                                 capfd):
     """A fresh machine: complete runs already in the repository's results folder are copied in
