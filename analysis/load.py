@@ -47,6 +47,7 @@ RUN_COLUMNS = (
     "complete",       # the log says the run finished
     "damaged",        # the file has no valid end (killed or still running)
     "run_id",         # 8-hex config hash written by training
+    "cpu",            # the CPU the log was started on (metadata machine.cpu_model; empty in logs that predate it)
     "path",           # the log's path relative to the loaded folder
 )
 
@@ -184,6 +185,7 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
         "total_epochs": int(config["epochs"]),
         "mu_eps": schedule_mean_rate(schedule, int(config["epochs"])),
         "run_id": str(meta["run_id"]),
+        "cpu": str((meta.get("machine") or {}).get("cpu_model") or ""),
     }
     return row, configuration(config)
 

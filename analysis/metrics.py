@@ -42,6 +42,8 @@ SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "au
                    *(f"raw_epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
                    f"p_improve_{BASELINE}"]
 
+RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix in ("", "raw_")
+                                  for threshold in SUCCESS_THRESHOLDS)]
 
 SMOOTHED_DECIMALS = 12  # far finer than any success rate (a fraction of test episodes), far coarser than float noise
 
@@ -79,6 +81,22 @@ def final_success(curves: pd.DataFrame) -> pd.DataFrame:
     """
     last = curves.sort_values(["run", "epoch"]).groupby("run", sort=False).tail(1)
     return last[[*GROUP, "run", "seed", "smoothed"]].rename(columns={"smoothed": "final"}).reset_index(drop=True)
+
+
+def run_outcomes(curves: pd.DataFrame) -> pd.DataFrame:
+    """Per run, in progress or complete (``curves``: :func:`smoothed_curves`): ``final``, its smoothed
+    success at its last epoch so far; ``epochs_to_0.5 / 0.9``, the first epoch its smoothed curve
+    reaches it, and ``raw_epochs_to_0.5 / 0.9`` its raw test success (NaN: not reached).
+
+    Returns columns run, then RUN_OUTCOME_COLUMNS, one row per run in ``curves``.
+    """
+    by_run = curves.groupby("run", sort=True)
+    table = pd.DataFrame({"final": by_run["smoothed"].last()})
+    for prefix, column in (("", "smoothed"), ("raw_", "success")):
+        for threshold in SUCCESS_THRESHOLDS:
+            reached = curves[curves[column] >= threshold].groupby("run")["epoch"].min()
+            table[f"{prefix}epochs_to_{threshold:g}"] = reached.reindex(table.index).astype("Int64")
+    return table.rename_axis("run").reset_index()[["run", *RUN_OUTCOME_COLUMNS]]
 
 
 def run_states(runs: pd.DataFrame) -> pd.Series:
@@ -304,7 +322,8 @@ class Analysis:
     of every run (``complete`` False: in progress, drawn on its own); the rest from complete
     runs only: medians: :func:`median_curves`; summary / aggregate: the two tables; shares:
     :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
-    :func:`composition_versus_paper`; window: the smoothing window in epochs.
+    :func:`composition_versus_paper`; window: the smoothing window in epochs; outcomes:
+    :func:`run_outcomes` of every run (each run's own numbers, the run list's).
     """
 
     runs: pd.DataFrame
@@ -317,6 +336,7 @@ class Analysis:
     q_means: pd.DataFrame
     composition_vs_paper: pd.DataFrame
     window: int
+    outcomes: pd.DataFrame
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
@@ -328,4 +348,5 @@ def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = B
                     summary=summary_table(complete_curves, runs, seed=seed),
                     aggregate=aggregate_table(complete_curves, runs, seed=seed), shares=shares,
                     q_means=mean_q(complete_epochs),
-                    composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window)
+                    composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window,
+                    outcomes=run_outcomes(curves))

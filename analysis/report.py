@@ -34,7 +34,7 @@ import pandas as pd
 from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
                                  place_after_curves)
 from analysis.load import ReportInputError, RunTable, start_reading
-from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, run_states
+from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from hersd.study import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
 from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
@@ -50,7 +50,8 @@ FORMATS = ("png", "svg", "pdf")
 DPI = 100
 FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
 MIME = {"png": "image/png", "svg": "image/svg+xml"}
-RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", "damaged", "run_id"]
+RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", *RUN_OUTCOME_COLUMNS,
+                    "cpu", "damaged", "run_id"]
 TABLE_NOTES = {
     "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
                 "other table: <b>seeds</b> counts them, <b>in_progress</b> the runs left out (not complete: "
@@ -67,6 +68,10 @@ TABLE_NOTES = {
     "aggregate": ("One row per configuration across the tasks it was run on: IQM of all its seeds' final "
                   "success; the bootstrap resamples seeds within each task (stratified); p_improve_HER is the "
                   "mean over tasks of the per-task probability of improvement."),
+    "runs": ("One row per run, in progress or complete, with its own numbers: <b>final</b>, its smoothed success "
+             "at its last epoch so far; <b>epochs_to_0.5 / 0.9</b> and <b>raw_epochs_to_0.5 / 0.9</b>, the first "
+             "epoch its smoothed curve and its raw test success reach them (empty: not reached); <b>cpu</b>, the "
+             "CPU its log records (empty for logs that predate it)."),
     "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
                     f"{task_title(PAPER_COMPOSITION_TASK)} with HER: the paper's numbers (Fig. 2, Sec. III) beside "
                     f"this data's median over the seeds that reached epoch {PAPER_COMPOSITION_EPOCH}, rescaled to "
@@ -208,9 +213,15 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
-    parts += ["<h2>Runs</h2>", html_table(runs.assign(state=run_states(runs))[RUN_LIST_COLUMNS])]
+    parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", html_table(_run_list(analysis)[RUN_LIST_COLUMNS])]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def _run_list(analysis: Analysis) -> pd.DataFrame:
+    """The run table with each run's state and own outcomes (:func:`analysis.metrics.run_outcomes`)."""
+    runs = analysis.runs
+    return runs.assign(state=run_states(runs)).merge(analysis.outcomes, on="run", how="left")
 
 
 def _copy_animations(analysis: Analysis, folder: Path, figures: Path) -> dict[str, str]:
@@ -310,7 +321,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     tables = {"summary": analysis.summary, "aggregate": analysis.aggregate}
     if not analysis.composition_vs_paper.empty:
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
-    written = _write_tables({**tables, "runs": runs.assign(state=run_states(runs)).drop(columns="run")}, out / "tables")
+    written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")

@@ -135,6 +135,17 @@ def write_campaign_midway(folder: Path, in_progress: bool = True) -> None:
         write_run(folder / "exp0", make_config(schedule=exponential), np.ones(3), complete=False)
 
 
+def test_each_runs_own_outcomes_equal_hand_values(analysed):
+    """Seeds 0, 1 and 3 of HER_SUCCESS: the smoothed values by hand in its comments, the raw ones as written."""
+    outcomes = analysed.outcomes.merge(analysed.runs[["run", "config", "seed"]], on="run")
+    her = outcomes[outcomes["config"] == "HER"].set_index("seed")
+    columns = ["final", "epochs_to_0.5", "epochs_to_0.9", "raw_epochs_to_0.5", "raw_epochs_to_0.9"]
+    assert her.loc[0, columns].tolist() == [pytest.approx(0.8), 5, pd.NA, 4, 5]
+    assert her.loc[1, columns].tolist() == [pytest.approx(2.6 / 3), 4, pd.NA, 3, 5]
+    assert her.loc[3, columns].tolist() == [pytest.approx(1.0), 3, 5, 2, 3]
+    assert len(outcomes) == len(analysed.runs)
+
+
 def test_runs_in_progress_enter_no_statistic(tmp_path):
     """Every table, median and mean equals that of the complete runs alone (a test that fails if an
     unfinished run counted anywhere: each would move the numbers)."""
@@ -175,8 +186,13 @@ def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path)
     assert exp_lines == {"HER", "HER (in progress)", "exp b1=0.5 b2=0.5 (in progress)"}  # drawn, and marked
 
     assert report_main([str(tmp_path), "--out", str(tmp_path / "report"), "--smooth", str(WINDOW)]) == 0
-    states = pd.read_csv(tmp_path / "report" / "tables" / "runs.csv").set_index("path")["state"]
-    assert states["her0/run.mcap"] == "complete" and states["her2/run.mcap"] == "in progress (epoch 4 of 6)"
+    runs = pd.read_csv(tmp_path / "report" / "tables" / "runs.csv").set_index("path")
+    assert runs.loc["her0/run.mcap", "state"] == "complete"
+    assert runs.loc["her2/run.mcap", "state"] == "in progress (epoch 4 of 6)"
+    # each run's own numbers, in progress too: her2 succeeds from its first epoch, linear2 never
+    assert runs.loc["her2/run.mcap", ["final", "epochs_to_0.9", "raw_epochs_to_0.9"]].tolist() == [1.0, 1, 1]
+    assert runs.loc["linear2/run.mcap", ["final", "epochs_to_0.5"]].fillna(-1).tolist() == [0.0, -1]
+    assert runs.loc["her0/run.mcap", ["final", "epochs_to_0.5", "raw_epochs_to_0.5"]].tolist() == [0.8, 5, 4]
     page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
     assert "in progress (epoch 3 of 6)" in page and "7 runs (3 in progress" in page
 
@@ -255,6 +271,13 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
 ])
 def test_config_labels(settings, label):
     assert config_label(*settings) == label
+
+
+def test_the_run_list_names_the_cpu_a_log_records(tmp_path):
+    write_run(tmp_path / "new", make_config(), np.zeros(6), meta={"machine": {"cpu_model": "AMD EPYC", "cpu_cores": 2}})
+    write_run(tmp_path / "old", make_config(seed=1), np.zeros(6))  # a log from before the machine was recorded
+    assert load_runs(tmp_path).runs.set_index("path")["cpu"].to_dict() == {"new/run.mcap": "AMD EPYC",
+                                                                           "old/run.mcap": ""}
 
 
 def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
