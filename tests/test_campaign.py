@@ -141,6 +141,9 @@ def test_import_takes_in_the_complete_logs_of_the_plan_made_elsewhere_and_nothin
                               np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
         twice = write_run(source / runs[5].relative, runs[5].config, np.linspace(0, 1, 200), meta=MADE_ELSEWHERE)
         ours = write_run(into / runs[5].relative, runs[5].config, np.linspace(0, 0.5, 200))
+        finished_there = write_run(source / runs[7].relative, runs[7].config, np.linspace(0, 1, 200),
+                                   meta=MADE_ELSEWHERE)
+        write_run(into / runs[7].relative, runs[7].config, np.linspace(0, 1, 9), complete=False)  # ours, midway
     damaged = source / runs[6].relative / "run.mcap"
     damaged.parent.mkdir(parents=True)
     damaged.write_bytes(b"not a log")
@@ -159,16 +162,19 @@ def test_import_takes_in_the_complete_logs_of_the_plan_made_elsewhere_and_nothin
     assert f"rejected  {unplanned}: not a run of campaign push_paper (its folder names no planned run)" in lines
     assert f"rejected  {twice}: kept {ours}, a complete log of the run already there" in lines
     assert any(line.startswith(f"rejected  {damaged}: unreadable (") for line in lines)
-    assert lines[-2] == f"8 log(s) found in {source}; 2 file(s) written to {into}; commit them with:"
+    assert any(line.startswith(f"imported  {into / runs[7].relative / 'run.mcap'}  from {finished_there}: ")
+               for line in lines)  # a complete log replaces an unfinished one
+    assert lines[-2] == f"9 log(s) found in {source}; 3 file(s) written to {into}; commit them with:"
     written = sorted(p.relative_to(into) for p in into.rglob("*") if p.is_file())
     assert written == sorted([runs[0].relative / "run.mcap", runs[0].relative / "policy" / "epoch_200.gif",
-                              runs[5].relative / "run.mcap"])
+                              runs[5].relative / "run.mcap", runs[7].relative / "run.mcap"])
     assert (into / runs[0].relative / "run.mcap").read_bytes() == good.read_bytes()
+    assert (into / runs[7].relative / "run.mcap").read_bytes() == finished_there.read_bytes()
 
     assert campaign.main(["import", str(source), "--into", str(into)]) == 0  # again: nothing new
     out = capsys.readouterr().out
     assert f"unchanged {into / runs[0].relative / 'run.mcap'}  from {good}" in out
-    assert out.splitlines()[-1] == f"8 log(s) found in {source}; 0 file(s) written to {into}"
+    assert out.splitlines()[-1] == f"9 log(s) found in {source}; 0 file(s) written to {into}"
 
 
 def test_import_from_a_missing_folder_is_one_line_and_exit_2(tmp_path, capsys):
