@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pandas as pd
@@ -46,3 +47,12 @@ def idle_machine(monkeypatch):
     from hersd import resources
 
     monkeypatch.setattr(resources, "idle_cores", lambda seconds=0.0: float(resources.available_cores()))
+
+
+@pytest.fixture(scope="module")
+def private_tempdir(tmp_path_factory):
+    """The process's temporary folder is one of pytest's while a module runs: gymnasium-robotics' maze
+    envs write their model file (``ant_maze<time>.xml``) beside a temporary directory and never remove it."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(tempfile, "tempdir", str(tmp_path_factory.mktemp("tempdir")))
+        yield

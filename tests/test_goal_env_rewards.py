@@ -12,6 +12,8 @@ import pytest
 import hersd.envs  # noqa: F401  (registers the gymnasium-robotics envs quietly)
 from hersd.goal_envs import is_goal_env, reward_family, reward_range, success_radius, vectorised_reward
 
+pytestmark = pytest.mark.usefixtures("private_tempdir")  # maze envs' model files stay in tmp_path
+
 FAMILIES = {
     "FetchReach-v4": "fetch",
     "FetchReachDense-v4": "fetch",

@@ -18,6 +18,8 @@ from hersd.run_state import RunState
 from hersd.runlog import read_run
 from hersd.train import EpochStats, collect, evaluate, train
 
+pytestmark = pytest.mark.usefixtures("private_tempdir")  # maze envs' model files stay in tmp_path
+
 # One cycle of one epoch, one update on 64 transitions, one test round, no animation.
 ONE_CYCLE = ["task.cycles_per_epoch=1", "ddpg.batches_per_cycle=1", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
              "render_every=0", "quiet=true", "threads=1"]
