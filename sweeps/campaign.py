@@ -238,7 +238,7 @@ def land(campaign: str, results_dir: Path, into: Path) -> int:
     relative paths below ``into``; a complete log there is never replaced by an unfinished one
     (a run imported from another machine that this campaign is training as well)."""
     plan = plan_runs(load_campaign(campaign), results_dir)
-    changed = []
+    landed, gone = [], []
     for run in plan:
         source_dir, target_dir = results_dir / run.relative, into / run.relative
         if not (source_dir / LOG_NAME).exists():
@@ -247,16 +247,21 @@ def land(campaign: str, results_dir: Path, into: Path) -> int:
         if state != "complete" and progress(target_dir / LOG_NAME, run.epochs) == "complete":
             print(f"{'kept':<9} {target_dir / LOG_NAME}  complete (the campaign's copy: {state})")
             continue
-        written, log = copy_run(source_dir, target_dir), target_dir / LOG_NAME
+        (written, removed), log = copy_run(source_dir, target_dir), target_dir / LOG_NAME
         print(f"{'landed' if log in written else 'unchanged':<9} {log}  {progress(log, run.epochs)}")
-        for path in written:
-            if path != log:
-                print(f"{'landed':<9} {path}")
-        changed += written
-    print(f"{len(changed)} file(s) landed in {into}" + ("; commit them with:\n  git add -- "
-                                                         + " ".join(shlex.quote(str(p)) for p in changed)
-                                                         if changed else ""))
+        for verb, paths in (("landed", written), ("removed", removed)):
+            for path in paths:
+                if path != log:
+                    print(f"{verb:<9} {path}")
+        landed += written
+        gone += removed
+    print(f"{len(landed)} file(s) landed in {into}" + (f", {len(gone)} removed" if gone else "") + _git_add(landed + gone))
     return 0
+
+
+def _git_add(paths: list[Path]) -> str:
+    """The end of a summary line: the command that commits ``paths`` (written or removed), if any."""
+    return "; commit them with:\n  git add -- " + " ".join(shlex.quote(str(p)) for p in paths) if paths else ""
 
 
 def copy_atomically(source: Path, target: Path) -> bool:
@@ -368,11 +373,17 @@ def complete_records(log: Path, run: PlannedRun) -> RunRecords:
     return records
 
 
-def copy_run(source: Path, target: Path) -> list[Path]:
+def copy_run(source: Path, target: Path) -> tuple[list[Path], list[Path]]:
     """Copy a run directory's log and policy animations (never a checkpoint) from ``source`` to
-    ``target`` (:func:`copy_atomically`); returns the files written (those that changed)."""
-    return [target / path.relative_to(source) for path in [source / LOG_NAME, *policy_animations(source).values()]
-            if copy_atomically(path, target / path.relative_to(source))]
+    ``target`` (:func:`copy_atomically`), and remove the animations of ``target`` that ``source``
+    lacks (drawn by an earlier attempt at the run, which restarted). Returns (files written, those
+    that changed; files removed)."""
+    written = [target / path.relative_to(source) for path in [source / LOG_NAME, *policy_animations(source).values()]
+               if copy_atomically(path, target / path.relative_to(source))]
+    removed = [path for epoch, path in policy_animations(target).items() if epoch not in policy_animations(source)]
+    for path in removed:
+        path.unlink()
+    return written, removed
 
 
 def import_logs(campaign: str, source: Path, into: Path) -> int:
@@ -385,7 +396,7 @@ def import_logs(campaign: str, source: Path, into: Path) -> int:
         raise CampaignError(f"no folder {source}; pass the folder holding the other machine's logs")
     plan = plan_runs(load_campaign(campaign), Path("/campaign"))
     logs = sorted(source.rglob(LOG_NAME))
-    imported = []
+    imported, gone = [], []
     for log in logs:
         run = next((run for run in plan if log.parent.as_posix().endswith("/" + run.relative.as_posix())), None)
         try:
@@ -402,15 +413,15 @@ def import_logs(campaign: str, source: Path, into: Path) -> int:
         except RejectedLog as reason:
             print(f"rejected  {log}: {reason}")
             continue
-        written = copy_run(log.parent, target)
+        written, removed = copy_run(log.parent, target)
         imported += written
+        gone += removed
         machine = meta.get("machine") or {}
         print(f"{'imported' if written else 'unchanged':<9} {target / LOG_NAME}  from {log}: made on {machine.get('cpu_model', 'an unrecorded CPU')} "
               f"({machine.get('cpu_cores', '?')} cores), commit {meta.get('git_commit')}, "
               f"started {meta.get('start_time')}: {command}")
     print(f"{len(logs)} log(s) found in {source}; {len(imported)} file(s) written to {into}"
-          + ("; commit them with:\n  git add -- " + " ".join(shlex.quote(str(p)) for p in imported)
-             if imported else ""))
+          + (f", {len(gone)} removed" if gone else "") + _git_add(imported + gone))
     return 0
 
 

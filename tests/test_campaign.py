@@ -96,11 +96,16 @@ def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path,
     assert (into / runs[0].relative / "run.mcap").read_bytes() == complete.read_bytes()
 
     write_log(results / runs[1].relative, 5, complete=False)  # the run went on
+    stale = policy_animation(into / runs[1].relative, 150)  # drawn by an earlier attempt, which restarted
+    stale.parent.mkdir()
+    stale.write_bytes(b"GIF89a another policy")
     assert campaign.main(["land", "--results-dir", str(results), "--into", str(into)]) == 0
     out = capsys.readouterr().out
     assert f"unchanged {into / runs[0].relative / 'run.mcap'}  complete" in out
     assert f"landed    {into / runs[1].relative / 'run.mcap'}  epoch 5 of 200" in out
+    assert f"removed   {stale}" in out and "1 file(s) landed in" in out and ", 1 removed; commit them" in out
     assert len(read_records(into / runs[1].relative / "run.mcap").records) == 5
+    assert not stale.exists() and policy_animation(into / runs[0].relative, 200).exists()
 
 
 def test_land_never_replaces_a_complete_log_with_an_unfinished_one(plan, tmp_path, capsys):
