@@ -255,7 +255,8 @@ def land(campaign: str, results_dir: Path, into: Path) -> int:
                     print(f"{verb:<9} {path}")
         landed += written
         gone += removed
-    print(f"{len(landed)} file(s) landed in {into}" + (f", {len(gone)} removed" if gone else "") + _git_add(landed + gone))
+    print(f"{len(landed)} file(s) landed in {into}" + (f", {len(gone)} removed" if gone else "")
+          + _git_add(landed + gone))
     return 0
 
 
@@ -417,9 +418,9 @@ def import_logs(campaign: str, source: Path, into: Path) -> int:
         imported += written
         gone += removed
         machine = meta.get("machine") or {}
-        print(f"{'imported' if written else 'unchanged':<9} {target / LOG_NAME}  from {log}: made on {machine.get('cpu_model', 'an unrecorded CPU')} "
-              f"({machine.get('cpu_cores', '?')} cores), commit {meta.get('git_commit')}, "
-              f"started {meta.get('start_time')}: {command}")
+        print(f"{'imported' if written else 'unchanged':<9} {target / LOG_NAME}  from {log}: "
+              f"made on {machine.get('cpu_model', 'an unrecorded CPU')} ({machine.get('cpu_cores', '?')} cores), "
+              f"commit {meta.get('git_commit')}, started {meta.get('start_time')}: {command}")
     print(f"{len(logs)} log(s) found in {source}; {len(imported)} file(s) written to {into}"
           + (f", {len(gone)} removed" if gone else "") + _git_add(imported + gone))
     return 0
