@@ -281,7 +281,7 @@ def copy_atomically(source: Path, target: Path) -> bool:
     return True
 
 
-def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
+def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None) -> int:
     """Start the campaign (:func:`run`) in a detached process unless one runs for ``results_dir`` already."""
     load_campaign(campaign)  # an unknown campaign is an error here, not in the log
     pid = campaign_pid(results_dir)
@@ -297,7 +297,7 @@ def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
     make_folder(results_dir)
     with open(log, "a") as output:
         process = subprocess.Popen([*RUNNER, "--campaign", campaign, "--results-dir", str(results_dir),
-                                    "--landed", str(landed.absolute())],
+                                    "--landed", str(landed.absolute()), *(["--jobs", str(jobs)] if jobs else [])],
                                    stdin=subprocess.DEVNULL, stdout=output, stderr=subprocess.STDOUT,
                                    start_new_session=True)
     (results_dir / PID_NAME).write_text(f"{process.pid}\n")
@@ -306,9 +306,10 @@ def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
     return 0
 
 
-def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
+def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None) -> int:
     """Run the stages' sweeps one after another in this process, after reusing the complete
-    runs landed in ``landed``; exit 1 if any sweep failed."""
+    runs landed in ``landed``, each sweep ``jobs`` runs at a time (None: the sweep's default, one
+    per core; with ``threads=auto`` the runs share the idle cores); exit 1 if any sweep failed."""
     stages = load_campaign(campaign)
     pid = campaign_pid(results_dir)
     if pid and pid != os.getpid():
@@ -324,7 +325,7 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO) -> int:
                  + ", ".join(str(run.relative) for run in reused))
         for number, stage in enumerate(stages, 1):
             for sweep in stage.sweeps:
-                command = [*sweep, f"results_dir={results_dir}"]
+                command = [*sweep, f"results_dir={results_dir}", *([f"hydra.launcher.n_jobs={jobs}"] if jobs else [])]
                 _say(f"stage {number}/{len(stages)} ({stage.name}): hersd-sweep {shlex.join(command)}")
                 if subprocess.run([*SWEEP, *command]).returncode:
                     failed.append(f"stage {number}: hersd-sweep {shlex.join(sweep)}")
@@ -448,6 +449,13 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _positive(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return int(text)
+
+
 def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = _OneLineParser(prog="hersd-campaign", description="A campaign of sweeps as one resumable command.")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_OneLineParser,
@@ -474,6 +482,9 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
             command.add_argument("--landed", type=Path, default=DEFAULT_INTO,
                                  help="complete runs landed here are copied in, not trained again "
                                       "(default: results, the repository's)")
+            command.add_argument("--jobs", type=_positive, default=None,
+                                 help="runs trained at once (default: one per core, one thread each); "
+                                      "--jobs 1 trains one run at a time on every idle core")
     return parser.parse_args(argv)
 
 
@@ -487,7 +498,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return land(args.campaign, results_dir, args.into)
         if args.command == "status":
             return status(args.campaign, results_dir)
-        return {"start": start, "run": run}[args.command](args.campaign, results_dir, args.landed)
+        return {"start": start, "run": run}[args.command](args.campaign, results_dir, args.landed, args.jobs)
     except CampaignError as err:
         print(f"hersd-campaign: error: {err}", file=sys.stderr)
         return 2

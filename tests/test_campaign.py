@@ -279,12 +279,17 @@ def test_the_runner_runs_every_sweep_in_stage_order(tmp_path, monkeypatch, capfd
     assert "stage 1/4 (HER and linear 0.25, seeds 0-2): hersd-sweep +grid=push_paper seeds=3" in out
     assert "campaign push_paper finished: every stage done" in out
     assert not (results / campaign.PID_NAME).exists()
+    # --jobs 1: every sweep trains one run at a time (a slow machine: one run finishes sooner)
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none"), "--jobs", "1"]) == 0
+    sweeps = [line.removeprefix("sweep ") for line in capfd.readouterr().out.splitlines() if line.startswith("sweep ")]
+    assert sweeps == [f"{sweep} hydra.launcher.n_jobs=1" for sweep in expected]
 
 
 @pytest.mark.parametrize("arguments, message", [
     (["stop"], "invalid choice: 'stop'"),
     (["status", "--campaign", "nope"], "unknown campaign 'nope'; choose one of: push_paper"),
     (["start", "--results-dir", "{blocker}/sub"], "cannot create"),
+    (["start", "--jobs", "0"], "argument --jobs: must be a whole number >= 1, got '0'"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, arguments, message):
     (tmp_path / "blocker").write_text("a file, not a folder")
