@@ -281,6 +281,11 @@ class TrainConfig:
     # Thread counts can change floating-point sums: logged, not part of the run's identity.
     threads: str = "auto"
     device: str = "auto"  # where networks and updates run: auto (cuda if available, else cpu) | cpu | cuda[:N]
+    # Treat denormal floats (|x| < 1.2e-38) as zero during the learner's updates, on the training thread
+    # (torch.set_flush_denormal): Adam's moments of units whose gradient died decay through the denormal
+    # range for thousands of steps, and x86 CPUs compute on denormals many times slower. Changes
+    # floating-point results as thread counts do: logged, not part of the run's identity.
+    flush_denormal: bool = False
 
     def __post_init__(self) -> None:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")

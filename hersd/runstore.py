@@ -37,7 +37,7 @@ LOCK_NAME = "run.lock"
 POLICY_DIR = "policy"  # the run's policy animations: policy/epoch_<k>.gif
 # Fields that change where, how loudly or how fast a run is written, not what it computes.
 NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device",
-              "render_every")
+              "flush_denormal", "render_every")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
 HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0}

@@ -161,17 +161,33 @@ def collect(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
 
 
 def update(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
-    """``batches_per_cycle`` updates on minibatches relabelled at ``relabel_prob``, then one target move."""
+    """``batches_per_cycle`` updates on minibatches relabelled at ``relabel_prob``, then one target move
+    (denormals flushed to zero throughout with ``flush_denormal``)."""
     d, algo = state.cfg.ddpg, state.cfg.algo
     stored = state.buffer.stored()
     episode_probs = state.prioritizer.probs(state.buffer.size) if state.prioritizer is not None else None
-    for _batch in range(d.batches_per_cycle):
-        batch = sample_transitions(stored, d.batch_size, relabel_prob, state.rng, state.reward, algo.lambda_r,
-                                   algo.lambda_h, algo.goal_strategy, episode_probs=episode_probs,
-                                   success_reward=state.spec.reward_range[1])
-        stats.add_update(state.agent.update(batch), batch)
-    state.agent.update_targets()
+    with denormals_flushed(state.cfg.flush_denormal):
+        for _batch in range(d.batches_per_cycle):
+            batch = sample_transitions(stored, d.batch_size, relabel_prob, state.rng, state.reward, algo.lambda_r,
+                                       algo.lambda_h, algo.goal_strategy, episode_probs=episode_probs,
+                                       success_reward=state.spec.reward_range[1])
+            stats.add_update(state.agent.update(batch), batch)
+        state.agent.update_targets()
     state.updates += d.batches_per_cycle
+
+
+@contextmanager
+def denormals_flushed(enabled: bool) -> Iterator[None]:
+    """Inside the block, with ``enabled``, this thread's float arithmetic treats denormals as zero
+    (x86 FTZ/DAZ through torch.set_flush_denormal); outside it, IEEE denormals as everywhere else."""
+    if not enabled:
+        yield
+        return
+    torch.set_flush_denormal(True)
+    try:
+        yield
+    finally:
+        torch.set_flush_denormal(False)
 
 
 def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:

@@ -135,7 +135,7 @@ def test_a_config_and_its_logged_dict_have_one_identity_however_old_the_log():
 def test_run_identity_ignores_where_and_how_a_run_is_executed():
     base = compose_train(["task=push"])
     for override in ("results_dir=/elsewhere", "quiet=true", "checkpoint_every=5", "keep_checkpoint=true",
-                     "threads=2", "device=cpu"):
+                     "threads=2", "device=cpu", "flush_denormal=true"):
         assert config_hash(compose_train(["task=push", override])) == config_hash(base), override
     assert not set(NOT_HASHED) & set(run_identity(base))
     assert config_hash(compose_train(["task=push", "seed=1"])) != config_hash(base)
