@@ -380,9 +380,10 @@ def copy_run(source: Path, target: Path) -> tuple[list[Path], list[Path]]:
     ``target`` (:func:`copy_atomically`), and remove the animations of ``target`` that ``source``
     lacks (drawn by an earlier attempt at the run, which restarted). Returns (files written, those
     that changed; files removed)."""
-    written = [target / path.relative_to(source) for path in [source / LOG_NAME, *policy_animations(source).values()]
+    animations = policy_animations(source)
+    written = [target / path.relative_to(source) for path in [source / LOG_NAME, *animations.values()]
                if copy_atomically(path, target / path.relative_to(source))]
-    removed = [path for epoch, path in policy_animations(target).items() if epoch not in policy_animations(source)]
+    removed = [path for epoch, path in policy_animations(target).items() if epoch not in animations]
     for path in removed:
         path.unlink()
     return written, removed
