@@ -4,7 +4,7 @@ A campaign is a list of stages, each a list of ``hersd-sweep`` command lines; ru
 another they make every run of the campaign. Subcommands (``--results-dir`` defaults to
 ``~/hersd-campaign``, outside the work tree):
 
-- ``start``  runs the stages in a detached background process (``run``), output to
+- ``start``  runs the campaign in a detached background process (``run``), output to
   ``<DIR>/campaign.log``, and returns at once; a campaign already running for DIR is left alone;
 - ``run``    the same in the foreground (what ``start`` runs);
 - ``status`` one line per planned run: complete, ``epoch N of K`` or new, and what is training;
@@ -18,8 +18,11 @@ run is trained twice.
 
 Planned runs are found the way hersd-sweep finds them: each sweep's grid is expanded by
 Hydra's basic sweeper and every job composed into its TrainConfig, whose
-:func:`hersd.runstore.run_dir` is the run's directory. The run store skips complete runs and
-resumes interrupted ones, so starting a campaign again finishes what is missing.
+:func:`hersd.runstore.run_dir` is the run's directory. ``run`` keeps one run per core training
+(``--jobs``), in plan order (stage by stage), each as the one-run sweep ``hersd-sweep <its
+overrides>``: a stage's last runs share the machine with the next stage's first instead of
+leaving cores idle. The run store resumes interrupted runs, so starting a campaign again
+finishes what is missing.
 """
 
 from __future__ import annotations
@@ -30,16 +33,18 @@ import shlex
 import subprocess
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
 from hersd.compose import CONFIG_MODULE, explain_config_error, group_options
 from hersd.config import TrainConfig
+from hersd.resources import available_cores
 from hersd.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 from hersd.runstore import LOCK_NAME, config_hash, policy_animations, run_dir, run_state
 from sweeps.hydra_private import basic_sweeper_class, grid_overrides
-from sweeps.launch import job_train_config, register_schemas
+from sweeps.launch import job_train_config, register_schemas, with_threads
 
 GROUP = "campaign"  # conf/campaign/<name>.yaml
 DEFAULT_CAMPAIGN = "push_paper"
@@ -51,6 +56,7 @@ PID_NAME = "campaign.pid"
 CAMPAIGN_LOG = "campaign.log"
 RUNNER = [sys.executable, "-m", "sweeps.campaign", "run"]  # what ``start`` detaches; its command line names this module
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]  # hersd-sweep in this interpreter
+POLL_SECONDS = 2.0  # how often the runner looks for a finished run
 
 
 class CampaignError(ValueError):
@@ -70,6 +76,7 @@ class PlannedRun:
     stage: int  # 1-based
     relative: Path  # e.g. push/her/constant-0.8/seed1-0c03aeaf
     config: TrainConfig
+    overrides: tuple[str, ...]  # hersd-sweep's command line for this run alone (its stage's sweep's job)
 
     @property
     def seed(self) -> int:
@@ -135,7 +142,7 @@ def plan_runs(stages: list[Stage], results_dir: Path) -> list[PlannedRun]:
                     for job in sweep_jobs([*sweep, f"results_dir={results_dir}"], compose):
                         cfg = job_config(job, compose, composed)
                         relative = run_dir(cfg).relative_to(results_dir)
-                        planned.setdefault(relative, PlannedRun(number, relative, cfg))
+                        planned.setdefault(relative, PlannedRun(number, relative, cfg, tuple(job)))
     except Exception as err:  # noqa: BLE001 - Hydra's composition errors become one line
         raise CampaignError(f"the campaign's sweeps do not compose: {explain_config_error(err)}") from None
     return list(planned.values())
@@ -307,9 +314,8 @@ def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: i
 
 
 def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None) -> int:
-    """Run the stages' sweeps one after another in this process, after reusing the complete
-    runs landed in ``landed``, each sweep ``jobs`` runs at a time (None: the sweep's default, one
-    per core; with ``threads=auto`` the runs share the idle cores); exit 1 if any sweep failed."""
+    """Run the campaign in this process: reuse the complete runs landed in ``landed``, then train
+    the rest ``jobs`` at a time (:func:`train_runs`; None: one per core); exit 1 if any run failed."""
     stages = load_campaign(campaign)
     pid = campaign_pid(results_dir)
     if pid and pid != os.getpid():
@@ -317,24 +323,53 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int
         return 0
     make_folder(results_dir)
     (results_dir / PID_NAME).write_text(f"{os.getpid()}\n")
-    failed = []
     try:
-        reused = reuse_landed(plan_runs(stages, results_dir), results_dir, landed)
+        plan = plan_runs(stages, results_dir)
+        reused = reuse_landed(plan, results_dir, landed)
         if reused:
             _say(f"{len(reused)} complete run(s) landed in {landed} reused, not trained again: "
                  + ", ".join(str(run.relative) for run in reused))
-        for number, stage in enumerate(stages, 1):
-            for sweep in stage.sweeps:
-                command = [*sweep, f"results_dir={results_dir}", *([f"hydra.launcher.n_jobs={jobs}"] if jobs else [])]
-                _say(f"stage {number}/{len(stages)} ({stage.name}): hersd-sweep {shlex.join(command)}")
-                if subprocess.run([*SWEEP, *command]).returncode:
-                    failed.append(f"stage {number}: hersd-sweep {shlex.join(sweep)}")
+        failed = train_runs(plan, stages, results_dir, jobs or available_cores())
     finally:
         if _pid_file(results_dir) == os.getpid():
             (results_dir / PID_NAME).unlink()
-    _say(f"campaign {campaign} finished" + (f"; failed: {'; '.join(failed)} (hersd-campaign start retries them)"
+    _say(f"campaign {campaign} finished" + (f"; failed: {', '.join(failed)} (hersd-campaign start retries them)"
                                             if failed else ": every stage done"))
     return 1 if failed else 0
+
+
+def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, jobs: int) -> list[str]:
+    """Train every planned run that is not complete, ``jobs`` at a time in plan order, each on
+    ``cores // jobs`` threads: a run starts as soon as one ends, so a stage's last runs share the
+    machine with the next stage's first. Each run is the one-run sweep ``hersd-sweep <its
+    overrides>``, the command line its stage's sweep gives it, so its log records the same
+    command and the run store resumes or skips it as that sweep would. -> the failed runs' dirs."""
+    threads = max(1, available_cores() // jobs)
+    waiting = deque(run for run in plan if run_state(results_dir / run.relative) != "complete")
+    _say(f"{len(plan)} planned runs: {len(plan) - len(waiting)} complete, {len(waiting)} to train, "
+         f"{jobs} at a time")
+    sweeps_dir = results_dir / ".sweeps" / time.strftime("%Y%m%d-%H%M%S")
+    training: dict[subprocess.Popen, PlannedRun] = {}
+    failed: list[str] = []
+    stage_said = 0
+    while waiting or training:
+        while waiting and len(training) < jobs:
+            planned = waiting.popleft()
+            if planned.stage != stage_said:
+                stage_said = planned.stage
+                _say(f"stage {planned.stage}/{len(stages)}: {stages[planned.stage - 1].name}")
+            command = with_threads(list(planned.overrides), threads)
+            _say(f"training {planned.relative}: hersd-sweep {shlex.join(command)}")
+            # its own sweep folder: runs started in the same second must not share Hydra's
+            sweep_dir = f"hydra.sweep.dir={sweeps_dir / planned.relative}"
+            training[subprocess.Popen([*SWEEP, *command, sweep_dir], stdin=subprocess.DEVNULL)] = planned
+        time.sleep(POLL_SECONDS)
+        for process in [process for process in training if process.poll() is not None]:
+            ended = training.pop(process)
+            if process.returncode:
+                failed.append(str(ended.relative))
+                _say(f"failed: {ended.relative} (hersd-sweep exit {process.returncode}; see above)")
+    return failed
 
 
 def reuse_landed(plan: list[PlannedRun], results_dir: Path, landed: Path) -> list[PlannedRun]:
@@ -484,8 +519,8 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
                                  help="complete runs landed here are copied in, not trained again "
                                       "(default: results, the repository's)")
             command.add_argument("--jobs", type=_positive, default=None,
-                                 help="runs trained at once (default: one per core, one thread each); "
-                                      "--jobs 1 trains one run at a time on every idle core")
+                                 help="runs trained at once (default: one per core), each on cores/N "
+                                      "threads; --jobs 1 trains one run at a time on every core")
     return parser.parse_args(argv)
 
 

@@ -4,6 +4,7 @@ the runner's stage order, bad input. No training: the sweeps are planned or repl
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -34,6 +35,11 @@ def write_log(directory: Path, epochs_done: int, complete: bool) -> Path:
         return write_run(directory, TrainConfig(epochs=200), np.linspace(0, 1, epochs_done), complete=complete)
 
 
+def run_overrides(run: campaign.PlannedRun, results: Path) -> list[str]:
+    """The run's one-run sweep command line for the results dir ``results``."""
+    return [f"results_dir={results}" if o.startswith("results_dir=") else o for o in run.overrides]
+
+
 def test_stages_add_seeds_evenly_and_each_run_is_planned_once(plan):
     runs = plan
     assert len({run.relative for run in runs}) == len(runs) == 20
@@ -49,15 +55,25 @@ def test_stages_add_seeds_evenly_and_each_run_is_planned_once(plan):
 
 
 def test_the_plan_is_hersd_sweeps_own(plan, tmp_path):
-    """Each stage's runs are the directories `hersd-sweep ... --dry-run` lists, in its order."""
+    """Each stage's runs are the directories `hersd-sweep ... --dry-run` lists, in its order, with
+    the overrides it gives each; those overrides alone make a one-run sweep of the same run."""
     results, runs = tmp_path / "results", plan
-    listed: list[Path] = []
+    listed: dict[Path, str] = {}
     for stage in campaign.load_campaign("push_paper"):
         for sweep in stage.sweeps:
             out = subprocess.run([*SWEEP, *sweep, f"results_dir={results}", "--dry-run"], capture_output=True,
                                  text=True, check=True, timeout=300).stdout
-            listed += [Path(line.split()[1]) for line in out.splitlines() if line.startswith("  new ")]
-    assert list(dict.fromkeys(listed)) == [results / run.relative for run in runs]
+            for line in out.splitlines():
+                if line.startswith("  new "):
+                    directory, overrides = line.removeprefix("  new").strip().split("  [")
+                    listed.setdefault(Path(directory), overrides.removesuffix("]"))
+    assert list(listed) == [results / run.relative for run in runs]
+    assert [listed[results / run.relative] for run in runs] == [" ".join(run_overrides(run, results)) for run in runs]
+    alone = run_overrides(runs[7], results)  # the control, seed 1: a sweep's job, not the sweep's first
+    out = subprocess.run([*SWEEP, *alone, "--dry-run"], capture_output=True, text=True, check=True,
+                         timeout=300).stdout
+    assert out.splitlines()[-2:] == ["sweep: 1 runs: 0 complete (skipped), 0 to resume, 1 new",
+                                     f"  new       {results / runs[7].relative}  [{' '.join(alone)}]"]
 
 
 def test_status_shows_complete_in_progress_training_and_new_runs(plan, tmp_path, capsys):
@@ -240,8 +256,8 @@ def test_start_detaches_one_campaign_and_refuses_a_second(tmp_path, monkeypatch,
 
 
 def test_a_started_campaign_of_complete_runs_runs_every_stage_and_ends(plan, tmp_path, monkeypatch, capsys):
-    """The real detached runner and hersd-sweep, on a results dir whose runs are all complete (so
-    nothing trains): every stage's sweep skips them, the log says so, the pid file goes."""
+    """The real detached runner on a results dir whose runs are all complete: nothing trains,
+    the log says so, the pid file goes."""
     results = tmp_path / "results"
     for run in plan:
         write_log(results / run.relative, 200, complete=True)
@@ -251,7 +267,8 @@ def test_a_started_campaign_of_complete_runs_runs_every_stage_and_ends(plan, tmp
     assert campaign.main(["start", "--results-dir", str(results)]) == 0
     assert started[0].wait(timeout=300) == 0
     log = (results / "campaign.log").read_text()
-    assert log.count("complete (skipped)") == 5 and "campaign push_paper finished: every stage done" in log
+    assert "20 planned runs: 20 complete, 0 to train" in log and "campaign: training " not in log
+    assert "campaign push_paper finished: every stage done" in log
     assert not (results / campaign.PID_NAME).exists()
     capsys.readouterr()
     assert campaign.main(["status", "--results-dir", str(results)]) == 0
@@ -267,22 +284,58 @@ def test_start_leaves_runs_being_trained_by_another_process_alone(plan, tmp_path
     assert not (results / campaign.PID_NAME).exists()
 
 
-def test_the_runner_runs_every_sweep_in_stage_order(tmp_path, monkeypatch, capfd):
-    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", "import sys; print('sweep', *sys.argv[1:])"])
-    results = tmp_path / "results"
-    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none")]) == 0
+def test_the_runner_keeps_jobs_runs_training_in_plan_order_across_stages(plan, tmp_path, monkeypatch, capfd):
+    """Every run not complete is trained as its own one-run sweep, in plan order, ``--jobs`` at a
+    time on cores/jobs threads each: a run starts as soon as one ends, also across a stage's end."""
+    events = tmp_path / "events"
+    stand_in = ("import sys, time; events = open(sys.argv[1], 'a'); run = sys.argv[-1]; "
+                "events.write(f'start {run}\\n'); events.flush(); time.sleep(0.4 if 'seed=2' in sys.argv else 0.05); "
+                "events.write(f'end {run}\\n'); print('sweep', *sys.argv[2:])")
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", stand_in, str(events)])
+    monkeypatch.setattr(campaign, "POLL_SECONDS", 0.02)
+    monkeypatch.setattr(campaign, "available_cores", lambda: 4)
+    results, runs = tmp_path / "results", plan
+    for run in runs[:5]:  # complete: not trained again
+        write_log(results / run.relative, 200, complete=True)
+    write_log(results / runs[5].relative, 3, complete=False)  # interrupted: resumed by its sweep
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none"), "--jobs", "2"]) == 0
     out = capfd.readouterr().out
-    sweeps = [line.removeprefix("sweep ") for line in out.splitlines() if line.startswith("sweep ")]
-    expected = [" ".join([*sweep, f"results_dir={results}"]) for stage in campaign.load_campaign("push_paper")
-                for sweep in stage.sweeps]
-    assert sweeps == expected and len(sweeps) == 5
-    assert "stage 1/4 (HER and linear 0.25, seeds 0-2): hersd-sweep +grid=push_paper seeds=3" in out
-    assert "campaign push_paper finished: every stage done" in out
-    assert not (results / campaign.PID_NAME).exists()
-    # --jobs 1: every sweep trains one run at a time (a slow machine: one run finishes sooner)
-    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none"), "--jobs", "1"]) == 0
-    sweeps = [line.removeprefix("sweep ") for line in capfd.readouterr().out.splitlines() if line.startswith("sweep ")]
-    assert sweeps == [f"{sweep} hydra.launcher.n_jobs=1" for sweep in expected]
+    assert "hersd-campaign: 20 planned runs: 5 complete, 15 to train, 2 at a time" in out
+    said = [line.split("hersd-campaign: training ", 1)[1] for line in out.splitlines() if "campaign: training " in line]
+    commands = {run.relative: [*run_overrides(run, results), "threads=2"] for run in runs[5:]}  # 4 cores / 2 jobs
+    assert said == [f"{relative}: hersd-sweep {' '.join(command)}" for relative, command in commands.items()]
+    launched = sorted(line.removeprefix("sweep ") for line in out.splitlines() if line.startswith("sweep "))
+    sweeps_dir = results / ".sweeps" / re.search(r"/\.sweeps/(\d{8}-\d{6})/", out).group(1)  # one per start
+    assert launched == sorted(" ".join([*command, f"hydra.sweep.dir={sweeps_dir / relative}"])
+                              for relative, command in commands.items())
+    assert "stage 2/4: the control (constant 0.874375), seeds 0-2" in out
+    assert "campaign push_paper finished: every stage done" in out and not (results / campaign.PID_NAME).exists()
+    at_once, most, overlapped = set(), 0, []
+    for kind, run in (line.split(" ", 1) for line in events.read_text().splitlines()):
+        at_once.add(run) if kind == "start" else at_once.discard(run)
+        most = max(most, len(at_once))
+        overlapped.append(set(at_once))
+    assert most == 2
+    last_of_stage_2 = str(sweeps_dir / runs[8].relative)  # the control, seed 2 (slow stand-in)
+    first_of_stage_3 = str(sweeps_dir / runs[9].relative)
+    assert {f"hydra.sweep.dir={last_of_stage_2}", f"hydra.sweep.dir={first_of_stage_3}"} in overlapped
+    # one at a time: one run on every core
+    assert campaign.main(["run", "--results-dir", str(tmp_path / "other"), "--landed", str(tmp_path / "none"),
+                          "--jobs", "1"]) == 0
+    said = [line for line in capfd.readouterr().out.splitlines() if "campaign: training " in line]
+    assert len(said) == 20 and all(line.endswith(" threads=4") for line in said)
+
+
+def test_a_failed_run_is_reported_and_the_others_go_on(plan, tmp_path, monkeypatch, capfd):
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", "import sys; sys.exit('seed=1' in sys.argv)"])
+    monkeypatch.setattr(campaign, "POLL_SECONDS", 0.02)
+    results = tmp_path / "results"
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none")]) == 1
+    out = capfd.readouterr().out
+    assert out.count("campaign: training ") == 20
+    failed = [str(run.relative) for run in plan if run.seed == 1]
+    assert f"failed: {failed[0]} (hersd-sweep exit 1; see above)" in out
+    assert f"campaign push_paper finished; failed: {', '.join(failed)} (hersd-campaign start retries them)" in out
 
 
 @pytest.mark.parametrize("arguments, message", [
