@@ -526,6 +526,13 @@ def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float,
     _label_outer(axes, "μ_ε (mean relabel rate\nover the K epochs)", xlabel="β1")
     axes[0].plot([], [], color="black", linewidth=1.4, label="eq. 10: exact mean")
     axes[0].plot([], [], color="black", linewidth=1.0, linestyle=":", label="eq. 11: 1 − β1/(1 + e^β2)")
+    decays = summary[summary["schedule"] != "constant"]
+    fixed = decays["schedule"].isin(FIXED_KINDS)
+    for marker, kinds, label in (("o", fixed, "decay schedule (eq. 10 μ_ε)"),
+                                 ("D", ~fixed, "success-driven rate (mean of its logged rates)")):
+        if kinds.any():  # the marker kinds; their colours are the colour bar's
+            axes[0].scatter([], [], marker=marker, s=50, facecolors="white", edgecolors="black",
+                            label=_legend_label(label))
     _figure_legend(figure, axes, legend_width)
     width, _ = figure.get_size_inches()
     bottom, top = axes[-1].get_position().y0, axes[0].get_position().y1

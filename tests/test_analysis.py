@@ -17,7 +17,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from analysis import load, metrics
-from analysis.figures import (LEGEND_CHARACTERS, composition_figures, config_styles, learning_curve_figures,
+from analysis.figures import (LEGEND_CHARACTERS, mean_rate_figures, composition_figures, config_styles, learning_curve_figures,
                               mep_figures, q_figures)
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
@@ -474,6 +474,24 @@ def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_
     logged = read_run(tmp_path / "success" / "run.mcap").epochs["relabel_rate"]
     assert list(logged) == pytest.approx([1.0, 1.0, 0.91, 0.82, 0.73, 0.64])  # 1 - 0.5 * last epoch's train success
     assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())
+
+
+@pytest.mark.parametrize("with_success", [False, True])
+def test_the_mean_rate_figure_names_the_marker_kinds_it_draws(tmp_path, with_success):
+    curve = np.linspace(0.0, 1.0, 6)
+    write_run(tmp_path / "her", make_config(), curve)
+    write_run(tmp_path / "linear", make_config(schedule=ScheduleConfig("linear", beta1=0.5)), curve)
+    if with_success:
+        write_run(tmp_path / "success", make_config(schedule=ScheduleConfig(kind="success", beta1=0.5)), curve)
+    table = load_runs(tmp_path)
+    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
+    labels = [text.get_text().replace("\n", " ") for text in figure.legends[0].get_texts()]
+    markers = [label for label in labels if label.startswith(("decay schedule", "success-driven"))]
+    assert markers == ["decay schedule (eq. 10 μ_ε)"] + (["success-driven rate (mean of its logged rates)"]
+                                                        if with_success else [])
+    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
+    assert [len(collection.get_offsets()) for collection in drawn] == [1] * (1 + with_success)  # circles, diamonds
+
 
 
 
