@@ -343,14 +343,15 @@ def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, j
     ``cores // jobs`` threads: a run starts as soon as one ends, so a stage's last runs share the
     machine with the next stage's first. Each run is the one-run sweep ``hersd-sweep <its
     overrides>``, the command line its stage's sweep gives it, so its log records the same
-    command and the run store resumes or skips it as that sweep would. -> the failed runs' dirs."""
+    command and the run store resumes or skips it as that sweep would. -> the failed runs' dirs, in
+    plan order."""
     threads = max(1, available_cores() // jobs)
     waiting = deque(run for run in plan if run_state(results_dir / run.relative) != "complete")
     _say(f"{len(plan)} planned runs: {len(plan) - len(waiting)} complete, {len(waiting)} to train, "
          f"{jobs} at a time")
     sweeps_dir = results_dir / ".sweeps" / time.strftime("%Y%m%d-%H%M%S")
     training: dict[subprocess.Popen, PlannedRun] = {}
-    failed: list[str] = []
+    failed: set[Path] = set()
     stage_said = 0
     while waiting or training:
         while waiting and len(training) < jobs:
@@ -367,9 +368,9 @@ def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, j
         for process in [process for process in training if process.poll() is not None]:
             ended = training.pop(process)
             if process.returncode:
-                failed.append(str(ended.relative))
+                failed.add(ended.relative)
                 _say(f"failed: {ended.relative} (hersd-sweep exit {process.returncode}; see above)")
-    return failed
+    return [str(run.relative) for run in plan if run.relative in failed]
 
 
 def reuse_landed(plan: list[PlannedRun], results_dir: Path, landed: Path) -> list[PlannedRun]:

@@ -48,9 +48,9 @@ def test_stages_add_seeds_evenly_and_each_run_is_planned_once(plan):
     assert by_stage[0] == [(arm, seed) for seed in range(3) for arm in ("constant-0.8", "linear-b1_0.25")]
     assert by_stage[1] == [("constant-0.874375", seed) for seed in range(3)]
     assert by_stage[2] == [("success-b1_0.25-w10", seed) for seed in range(3)]
-    assert by_stage[3] == [(arm, seed) for seed in (3, 4) for arm in ("constant-0.8", "linear-b1_0.25",
-                                                                      "constant-0.874375")] + \
-        [("success-b1_0.25-w10", seed) for seed in (3, 4)]  # seeds 0-2 of stage 4's grids: planned before
+    assert by_stage[3] == [(arm, seed) for seed in (3, 4) for arm in ("constant-0.8", "linear-b1_0.25")] + \
+        [(arm, seed) for arm in ("constant-0.874375", "success-b1_0.25-w10") for seed in (3, 4)]
+    # seeds 0-2 of stage 4's grids were planned before: HER and linear 0.25 (the acceptance's 5 seeds) first
     assert {run.epochs for run in runs} == {200}
 
 
