@@ -82,7 +82,8 @@ def _fail(message: str, code: int = 2) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
-    losses turn NaN or infinite with one line and exit code 1."""
+    losses turn NaN or infinite with one line and exit code 1, an interrupt (Ctrl-C) with one line
+    and exit code 130."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
@@ -111,6 +112,10 @@ def main(argv: list[str] | None = None) -> None:
         _fail(str(err))
     except NonFiniteLossError as err:
         _fail(str(err), code=1)
+    except KeyboardInterrupt:
+        print(f"hersd-train: interrupted; the finished epochs are kept in {run_dir(cfg)}: re-run the same "
+              "command to resume", file=sys.stderr)
+        sys.exit(130)
     print(log_path)
 
 

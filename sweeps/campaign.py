@@ -57,6 +57,7 @@ CAMPAIGN_LOG = "campaign.log"
 RUNNER = [sys.executable, "-m", "sweeps.campaign", "run"]  # what ``start`` detaches; its command line names this module
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]  # hersd-sweep in this interpreter
 POLL_SECONDS = 2.0  # how often the runner looks for a finished run
+STOP_SECONDS = 60.0  # how long an interrupted runner waits for its runs to save and end before stopping them
 
 
 class CampaignError(ValueError):
@@ -330,6 +331,9 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int
             _say(f"{len(reused)} complete run(s) landed in {landed} reused, not trained again: "
                  + ", ".join(str(run.relative) for run in reused))
         failed = train_runs(plan, stages, results_dir, jobs or available_cores())
+    except KeyboardInterrupt:
+        _say("interrupted; finished runs and epochs are kept: hersd-campaign start resumes the campaign")
+        return 130
     finally:
         if _pid_file(results_dir) == os.getpid():
             (results_dir / PID_NAME).unlink()
@@ -353,23 +357,32 @@ def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, j
     training: dict[subprocess.Popen, PlannedRun] = {}
     failed: set[Path] = set()
     stage_said = 0
-    while waiting or training:
-        while waiting and len(training) < jobs:
-            planned = waiting.popleft()
-            if planned.stage != stage_said:
-                stage_said = planned.stage
-                _say(f"stage {planned.stage}/{len(stages)}: {stages[planned.stage - 1].name}")
-            command = with_threads(list(planned.overrides), threads)
-            _say(f"training {planned.relative}: hersd-sweep {shlex.join(command)}")
-            # its own sweep folder: runs started in the same second must not share Hydra's
-            sweep_dir = f"hydra.sweep.dir={sweeps_dir / planned.relative}"
-            training[subprocess.Popen([*SWEEP, *command, sweep_dir], stdin=subprocess.DEVNULL)] = planned
-        time.sleep(POLL_SECONDS)
-        for process in [process for process in training if process.poll() is not None]:
-            ended = training.pop(process)
-            if process.returncode:
-                failed.add(ended.relative)
-                _say(f"failed: {ended.relative} (hersd-sweep exit {process.returncode}; see above)")
+    try:
+        while waiting or training:
+            while waiting and len(training) < jobs:
+                planned = waiting.popleft()
+                if planned.stage != stage_said:
+                    stage_said = planned.stage
+                    _say(f"stage {planned.stage}/{len(stages)}: {stages[planned.stage - 1].name}")
+                command = with_threads(list(planned.overrides), threads)
+                _say(f"training {planned.relative}: hersd-sweep {shlex.join(command)}")
+                # its own sweep folder: runs started in the same second must not share Hydra's
+                sweep_dir = f"hydra.sweep.dir={sweeps_dir / planned.relative}"
+                training[subprocess.Popen([*SWEEP, *command, sweep_dir], stdin=subprocess.DEVNULL)] = planned
+            time.sleep(POLL_SECONDS)
+            for process in [process for process in training if process.poll() is not None]:
+                ended = training.pop(process)
+                if process.returncode:
+                    failed.add(ended.relative)
+                    _say(f"failed: {ended.relative} (hersd-sweep exit {process.returncode}; see above)")
+    except KeyboardInterrupt:  # Ctrl-C reaches the runs too (one process group): let them save and end
+        for process in training:
+            try:
+                process.wait(timeout=STOP_SECONDS)
+            except subprocess.TimeoutExpired:
+                process.terminate()
+                process.wait()
+        raise
     return [str(run.relative) for run in plan if run.relative in failed]
 
 

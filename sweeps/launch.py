@@ -230,7 +230,8 @@ def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -
 
 
 def main() -> None:
-    """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs."""
+    """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs; an
+    interrupt (Ctrl-C) ends with one line and exit code 130."""
     import hydra
 
     if "--dry-run" in sys.argv:
@@ -243,6 +244,10 @@ def main() -> None:
         if end.code and not _composed:
             print(f"hersd-sweep: valid choices: {choices_line()}", file=sys.stderr)
         raise
+    except KeyboardInterrupt:
+        print("hersd-sweep: interrupted; finished runs and epochs are kept: re-run the same command to resume",
+              file=sys.stderr)
+        sys.exit(130)
 
 
 def choices_line() -> str:

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 from unittest import mock
@@ -336,6 +338,33 @@ def test_a_failed_run_is_reported_and_the_others_go_on(plan, tmp_path, monkeypat
     failed = [str(run.relative) for run in plan if run.seed == 1]
     assert f"failed: {failed[0]} (hersd-sweep exit 1; see above)" in out
     assert f"campaign push_paper finished; failed: {', '.join(failed)} (hersd-campaign start retries them)" in out
+
+
+def test_an_interrupted_runner_lets_its_runs_end_then_says_how_to_resume(tmp_path, monkeypatch, capfd):
+    """Ctrl-C while two runs train: the runner waits up to STOP_SECONDS for each (a run saves its
+    last epoch and ends on the same Ctrl-C), stops those still running, says how to resume, exit 130."""
+    stand_in = "import sys, time; time.sleep(0.3 if 'schedule=constant' in sys.argv else 60)"  # HER ends, linear not
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", stand_in])
+    monkeypatch.setattr(campaign, "STOP_SECONDS", 3.0)
+    started = []
+    real_popen = subprocess.Popen
+    monkeypatch.setattr(subprocess, "Popen", lambda *a, **k: started.append(real_popen(*a, **k)) or started[-1])
+
+    real_sleep, calls = time.sleep, []
+
+    def interrupt_once(seconds: float) -> None:  # the runner's first wait is cut short by Ctrl-C
+        calls.append(seconds)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        real_sleep(seconds)
+
+    monkeypatch.setattr(campaign.time, "sleep", interrupt_once)
+    results = tmp_path / "results"
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(tmp_path / "none"), "--jobs", "2"]) == 130
+    assert [process.returncode for process in started] == [0, -signal.SIGTERM]
+    assert "interrupted; finished runs and epochs are kept: hersd-campaign start resumes the campaign" in \
+        capfd.readouterr().out
+    assert not (results / campaign.PID_NAME).exists()
 
 
 @pytest.mark.parametrize("arguments, message", [

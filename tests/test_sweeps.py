@@ -6,6 +6,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -127,6 +128,38 @@ def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
                 for line in p.read_text().splitlines()]
     for path in finished:
         assert progress.count(str(path.parent)) == 1
+
+
+def group_alive(group: int, seconds: float = 10.0) -> bool:
+    """Whether processes of the process group ``group`` are still running after ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(group, 0)
+        except ProcessLookupError:
+            return False
+        time.sleep(0.1)
+    return True
+
+
+def test_ctrl_c_ends_a_sweep_with_one_line_and_exit_130_and_keeps_its_work(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) during the second run: one line, exit 130,
+    no process left behind, the first run complete; the same command finishes the rest."""
+    args = ["+grid=smoke", "epochs=3", *TINY, "hydra.launcher.n_jobs=1", f"results_dir={tmp_path}"]
+    proc = subprocess.Popen([*SWEEP, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for line in proc.stdout:
+        if line.startswith("[sweep 1/"):
+            os.killpg(proc.pid, signal.SIGINT)
+            break
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130
+    assert err.strip().splitlines()[-1] == ("hersd-sweep: interrupted; finished runs and epochs are kept: re-run "
+                                            "the same command to resume") and "Traceback" not in err
+    assert not group_alive(proc.pid)  # the sweep's workers ended with it
+    assert sum(read_run(p).complete for p in tmp_path.rglob("run.mcap")) >= 1
+    result = sweep(*args)
+    assert all(read_run(p).complete for p in tmp_path.rglob("run.mcap")) and "0 failed" in result.stdout
 
 
 def test_submitit_local_launcher_runs_the_same_sweep(tmp_path):

@@ -97,6 +97,26 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 
 
+def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resumes(tmp_path):
+    args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for line in proc.stdout:
+        if line.startswith("epoch") and line.split()[1].startswith("1/"):
+            proc.send_signal(signal.SIGINT)
+            break
+    _, err = proc.communicate(timeout=120)
+    log_path = next((tmp_path / "cut").rglob("run.mcap"))
+    assert proc.returncode == 130
+    assert err.strip() == (f"hersd-train: interrupted; the finished epochs are kept in {log_path.parent}: "
+                           "re-run the same command to resume")
+    assert 1 <= len(read_run(log_path).epochs) <= 3
+    subprocess.run([sys.executable, "-m", "hersd.cli", *args], check=True, capture_output=True)
+    reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
+    pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
+
+
 def _stopped_after_epoch_1(tmp_path: Path) -> tuple[list[str], Path]:
     """A run of 3 epochs stopped after epoch 1 (log + checkpoint on disk) -> (its args, its directory)."""
     args = [*TINY, "epochs=3", f"results_dir={tmp_path}"]
