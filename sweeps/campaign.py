@@ -57,6 +57,7 @@ CAMPAIGN_LOG = "campaign.log"
 RUNNER = [sys.executable, "-m", "sweeps.campaign", "run"]  # what ``start`` detaches; its command line names this module
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]  # hersd-sweep in this interpreter
 POLL_SECONDS = 2.0  # how often the runner looks for a finished run
+PACE_EPOCHS = 5  # status: a training run's pace is the mean time of its last this many epochs
 STOP_SECONDS = 60.0  # how long an interrupted runner waits for its runs to save and end before stopping them
 
 
@@ -214,6 +215,22 @@ def progress(log: Path, epochs: int) -> str:
     return "complete" if records.complete else f"epoch {len(records.records)} of {epochs}"
 
 
+def pace(log: Path, epochs: int) -> str:
+    """A run's recent seconds per epoch (the mean of its last PACE_EPOCHS) and the time its
+    remaining epochs take at that pace, e.g. ``31 s per epoch, ~1.5 h to go``; "" without epochs."""
+    try:
+        done = read_records(log).records
+    except (OSError, RunLogError):
+        return ""
+    recent = [record["epoch_seconds"] for record in done[-PACE_EPOCHS:]]
+    if not recent:
+        return ""
+    seconds = sum(recent) / len(recent)
+    left = seconds * max(epochs - len(done), 0)
+    return f"{seconds:.0f} s per epoch, ~" + (f"{left / 3600:.1f} h" if left >= 3600 else f"{left / 60:.0f} min") \
+        + " to go"
+
+
 # --------------------------------------------------------------------------- subcommands
 def status(campaign: str, results_dir: Path) -> int:
     """Print the campaign process's state and one line per planned run."""
@@ -230,10 +247,14 @@ def status(campaign: str, results_dir: Path) -> int:
     print(f"{'stage':<6} {'arm':<32} {'seed':<5} state")
     states = []
     for run in plan:
-        state = progress(results_dir / run.relative / LOG_NAME, run.epochs)
+        log = results_dir / run.relative / LOG_NAME
+        state = progress(log, run.epochs)
         holder = busy.get(results_dir / run.relative)
-        states.append(state)
-        print(f"{run.stage:<6} {run.arm:<32} {run.seed:<5} {state}" + (f", training (pid {holder})" if holder else ""))
+        states.append(state)  # counted before the training note
+        if holder:
+            recent = pace(log, run.epochs) if state.startswith("epoch ") else ""
+            state += f", training (pid {holder})" + (f", {recent}" if recent else "")
+        print(f"{run.stage:<6} {run.arm:<32} {run.seed:<5} {state}")
     done = states.count("complete")
     started = sum(state.startswith("epoch ") for state in states)
     print(f"{len(plan)} planned runs: {done} complete, {started} in progress, {states.count('new')} new"

@@ -89,9 +89,16 @@ def test_status_shows_complete_in_progress_training_and_new_runs(plan, tmp_path,
     assert lines[0] == f"campaign push_paper in {results}: not running; process(es) {os.getpid()} train runs here"
     rows = [line.split(maxsplit=3) for line in lines[2:-1]]
     assert [(int(stage), arm, int(seed)) for stage, arm, seed, _ in rows] == [(r.stage, r.arm, r.seed) for r in runs]
-    assert [state for *_, state in rows[:4]] == ["complete", "epoch 3 of 200",
-                                                 f"epoch 7 of 200, training (pid {os.getpid()})", "new"]
+    assert [state for *_, state in rows[:4]] == ["complete", "epoch 3 of 200",  # 45 s per synthetic epoch:
+                                                 f"epoch 7 of 200, training (pid {os.getpid()}), 45 s per epoch, "
+                                                 f"~2.4 h to go", "new"]  # 193 x 45 s
     assert lines[-1] == "20 planned runs: 1 complete, 2 in progress, 17 new; 1 training now"
+
+
+def test_pace_is_the_recent_epoch_time_and_the_time_to_go(tmp_path):
+    assert campaign.pace(write_log(tmp_path / "late", 195, complete=False), 200) == "45 s per epoch, ~4 min to go"
+    assert campaign.pace(write_log(tmp_path / "early", 20, complete=False), 200) == "45 s per epoch, ~2.2 h to go"
+    assert campaign.pace(tmp_path / "none" / "run.mcap", 200) == ""
 
 
 def test_land_copies_every_started_log_and_replaces_older_copies(plan, tmp_path, capsys):
