@@ -35,6 +35,7 @@ import sys
 import time
 from collections import deque
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -310,7 +311,8 @@ def copy_atomically(source: Path, target: Path) -> bool:
     return True
 
 
-def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None) -> int:
+def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None,
+          commit: bool = False) -> int:
     """Start the campaign (:func:`run`) in a detached process unless one runs for ``results_dir`` already."""
     load_campaign(campaign)  # an unknown campaign is an error here, not in the log
     pid = campaign_pid(results_dir)
@@ -326,7 +328,8 @@ def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: i
     make_folder(results_dir)
     with open(log, "a") as output:
         process = subprocess.Popen([*RUNNER, "--campaign", campaign, "--results-dir", str(results_dir),
-                                    "--landed", str(landed.absolute()), *(["--jobs", str(jobs)] if jobs else [])],
+                                    "--landed", str(landed.absolute()), *(["--jobs", str(jobs)] if jobs else []),
+                                    *(["--commit"] if commit else [])],
                                    stdin=subprocess.DEVNULL, stdout=output, stderr=subprocess.STDOUT,
                                    start_new_session=True)
     (results_dir / PID_NAME).write_text(f"{process.pid}\n")
@@ -335,9 +338,12 @@ def start(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: i
     return 0
 
 
-def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None) -> int:
+def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int | None = None,
+        commit: bool = False) -> int:
     """Run the campaign in this process: reuse the complete runs landed in ``landed``, then train
-    the rest ``jobs`` at a time (:func:`train_runs`; None: one per core); exit 1 if any run failed."""
+    the rest ``jobs`` at a time (:func:`train_runs`; None: one per core); with ``commit``, land
+    each run in ``landed`` and commit it the moment it completes (:func:`land_and_commit`).
+    Exit 1 if any run failed."""
     stages = load_campaign(campaign)
     pid = campaign_pid(results_dir)
     if pid and pid != os.getpid():
@@ -351,7 +357,8 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int
         if reused:
             _say(f"{len(reused)} complete run(s) landed in {landed} reused, not trained again: "
                  + ", ".join(str(run.relative) for run in reused))
-        failed = train_runs(plan, stages, results_dir, jobs or available_cores())
+        completed = partial(land_and_commit, results_dir=results_dir, into=landed.absolute()) if commit else None
+        failed = train_runs(plan, stages, results_dir, jobs or available_cores(), completed)
     except KeyboardInterrupt:
         _say("interrupted; finished runs and epochs are kept: hersd-campaign start resumes the campaign")
         return 130
@@ -363,13 +370,14 @@ def run(campaign: str, results_dir: Path, landed: Path = DEFAULT_INTO, jobs: int
     return 1 if failed else 0
 
 
-def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, jobs: int) -> list[str]:
+def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, jobs: int,
+               completed: Callable[[PlannedRun], None] | None = None) -> list[str]:
     """Train every planned run that is not complete, ``jobs`` at a time in plan order, each on
     ``cores // jobs`` threads: a run starts as soon as one ends, so a stage's last runs share the
     machine with the next stage's first. Each run is the one-run sweep ``hersd-sweep <its
     overrides>``, the command line its stage's sweep gives it, so its log records the same
-    command and the run store resumes or skips it as that sweep would. -> the failed runs' dirs, in
-    plan order."""
+    command and the run store resumes or skips it as that sweep would. ``completed`` is called
+    with each run whose log is complete when its sweep ends. -> the failed runs' dirs, in plan order."""
     threads = max(1, available_cores() // jobs)
     waiting = deque(run for run in plan if run_state(results_dir / run.relative) != "complete")
     _say(f"{len(plan)} planned runs: {len(plan) - len(waiting)} complete, {len(waiting)} to train, "
@@ -396,6 +404,8 @@ def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, j
                 if process.returncode:
                     failed.add(ended.relative)
                     _say(f"failed: {ended.relative} (hersd-sweep exit {process.returncode}; see above)")
+                elif completed and progress(results_dir / ended.relative / LOG_NAME, ended.epochs) == "complete":
+                    completed(ended)
     except KeyboardInterrupt:  # Ctrl-C reaches the runs too (one process group): let them save and end
         for process in training:
             try:
@@ -405,6 +415,25 @@ def train_runs(plan: list[PlannedRun], stages: list[Stage], results_dir: Path, j
                 process.wait()
         raise
     return [str(run.relative) for run in plan if run.relative in failed]
+
+
+def land_and_commit(run: PlannedRun, results_dir: Path, into: Path) -> None:
+    """Copy a run that has just completed into ``into`` (:func:`copy_run`) and commit the files
+    written or removed with git, and only those (whatever else is staged stays staged); a folder
+    outside a git work tree or a failed git command leaves them landed, uncommitted, and says so."""
+    written, removed = copy_run(results_dir / run.relative, into / run.relative)
+    paths = [str(path) for path in written + removed]
+    if not paths:
+        return
+    message = f"campaign: {run.relative} complete ({run.epochs} epochs), landed by hersd-campaign"
+    for step in (["git", "add", "--", *paths], ["git", "commit", "--quiet", "--only", "-m", message, "--", *paths]):
+        done = subprocess.run(step, cwd=into, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+        if done.returncode:
+            cause = (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
+            _say(f"landed {run.relative} in {into}, not committed (git {step[1]}: {cause}); "
+                 f"commit it with: git add -- {shlex.join(paths)} && git commit")
+            return
+    _say(f"landed {run.relative} in {into} and committed it: {message}")
 
 
 def reuse_landed(plan: list[PlannedRun], results_dir: Path, landed: Path) -> list[PlannedRun]:
@@ -553,6 +582,9 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
             command.add_argument("--landed", type=Path, default=DEFAULT_INTO,
                                  help="complete runs landed here are copied in, not trained again "
                                       "(default: results, the repository's)")
+            command.add_argument("--commit", action="store_true",
+                                 help="land each run in the --landed folder the moment it completes and commit "
+                                      "its log and animations there with git (those files only)")
             command.add_argument("--jobs", type=_positive, default=None,
                                  help="runs trained at once (default: one per core), each on cores/N "
                                       "threads; --jobs 1 trains one run at a time on every core")
@@ -569,7 +601,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return land(args.campaign, results_dir, args.into)
         if args.command == "status":
             return status(args.campaign, results_dir)
-        return {"start": start, "run": run}[args.command](args.campaign, results_dir, args.landed, args.jobs)
+        return {"start": start, "run": run}[args.command](args.campaign, results_dir, args.landed, args.jobs,
+                                                          args.commit)
     except CampaignError as err:
         print(f"hersd-campaign: error: {err}", file=sys.stderr)
         return 2

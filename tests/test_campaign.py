@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -333,6 +334,60 @@ def test_the_runner_keeps_jobs_runs_training_in_plan_order_across_stages(plan, t
                           "--jobs", "1"]) == 0
     said = [line for line in capfd.readouterr().out.splitlines() if "campaign: training " in line]
     assert len(said) == 20 and all(line.endswith(" threads=4") for line in said)
+
+
+def test_commit_lands_each_run_the_moment_it_completes_and_commits_it_alone(plan, tmp_path, monkeypatch, capfd):
+    """--commit: a run whose sweep ends complete is copied into the repository and committed with
+    its animation, the user's staged work left staged; an unfinished or failed run is not landed."""
+    results, repo, runs = tmp_path / "results", tmp_path / "repo", plan
+    landed = repo / "results"
+    staging = tmp_path / "made"  # what each stand-in sweep "trains": a complete log, or one of 3 epochs
+    for index, run in enumerate(runs[:4]):
+        log = write_log(staging / run.relative, 200 if index != 1 else 3, complete=index != 1)
+        if index == 0:
+            animation = policy_animation(log.parent, 200)
+            animation.parent.mkdir()
+            animation.write_bytes(b"GIF89a a policy")
+    for run in runs[4:]:
+        write_log(results / run.relative, 200, complete=True)
+    stand_in = ("import shutil, sys; args = dict(a.split('=', 1) for a in sys.argv[2:]); "
+                "relative = args['hydra.sweep.dir'].split('/.sweeps/', 1)[1].split('/', 1)[1]; "
+                "shutil.copytree(f'{sys.argv[1]}/{relative}', f\"{args['results_dir']}/{relative}\"); "
+                "sys.exit(3 if 'seed=1' in sys.argv and 'schedule=constant' in sys.argv else 0)")
+    monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", stand_in, str(staging)])
+    monkeypatch.setattr(campaign, "POLL_SECONDS", 0.02)
+    git = lambda *a: subprocess.run(["git", *a], cwd=repo, check=True, capture_output=True, text=True).stdout
+    repo.mkdir()
+    git("init", "-q")
+    git("config", "user.email", "ci@example.org")
+    git("config", "user.name", "CI")
+    (repo / "notes.txt").write_text("work of the user's, staged\n")
+    git("add", "notes.txt")
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(landed), "--commit"]) == 1
+    out = capfd.readouterr().out
+    commits = set()
+    for commit in git("log", "--format=%H").split():
+        subject, _, *files = git("show", "--format=%s", "--name-only", commit).strip().split("\n")
+        commits.add((subject, tuple(sorted(files))))
+    assert commits == {
+        (f"campaign: {runs[0].relative} complete (200 epochs), landed by hersd-campaign",
+         (f"results/{runs[0].relative}/policy/epoch_200.gif", f"results/{runs[0].relative}/run.mcap")),
+        (f"campaign: {runs[3].relative} complete (200 epochs), landed by hersd-campaign",
+         (f"results/{runs[3].relative}/run.mcap",))}
+    assert (landed / runs[0].relative / "run.mcap").read_bytes() == (results / runs[0].relative / "run.mcap").read_bytes()
+    assert not (landed / runs[1].relative).exists()  # unfinished when its sweep ended
+    assert not (landed / runs[2].relative).exists()  # its sweep failed (HER seed 1)
+    assert git("diff", "--cached", "--name-only") == "notes.txt\n"  # still staged, not committed
+    assert f"landed {runs[0].relative} in {landed} and committed it" in out
+    # outside a git work tree: landed all the same, and the line says how to commit
+    for run in runs[:4]:
+        shutil.rmtree(results / run.relative)
+    elsewhere = tmp_path / "plain" / "results"
+    assert campaign.main(["run", "--results-dir", str(results), "--landed", str(elsewhere), "--commit"]) == 1
+    out = capfd.readouterr().out
+    assert (elsewhere / runs[3].relative / "run.mcap").exists()
+    assert f"landed {runs[3].relative} in {elsewhere}, not committed (git add: " in out
+    assert "commit it with: git add -- " in out
 
 
 def test_a_failed_run_is_reported_and_the_others_go_on(plan, tmp_path, monkeypatch, capfd):
