@@ -371,13 +371,19 @@ def _finished_trials(storage: str) -> dict[int, tuple]:
     return {t.number: (t.state, t.value, tuple(sorted(t.params.items()))) for t in study.get_trials(states=FINISHED)}
 
 
-def _count_finished(db: Path) -> int:
-    """Read-only peek at a study being written (no optuna: it would create tables)."""
+def _trial_numbers(db: Path, states: tuple[str, ...]) -> list[int]:
+    """Read-only peek at a study being written (no optuna: it would create tables) -> numbers of trials in ``states``."""
+    marks = ", ".join("?" * len(states))
     try:
         with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=30) as connection:
-            return connection.execute("SELECT count(*) FROM trials WHERE state IN ('COMPLETE', 'PRUNED')").fetchone()[0]
+            rows = connection.execute(f"SELECT number FROM trials WHERE state IN ({marks})", states).fetchall()
     except sqlite3.OperationalError:  # not created yet
-        return 0
+        return []
+    return sorted(number for (number,) in rows)
+
+
+def _count_finished(db: Path) -> int:
+    return len(_trial_numbers(db, ("COMPLETE", "PRUNED")))
 
 
 def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
@@ -391,7 +397,8 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     try:
         while time.monotonic() < deadline and first.poll() is None:
             db = next((tmp_path / "search").glob("*.db"), None) if (tmp_path / "search").exists() else None
-            if db is not None and _count_finished(db) >= 1:
+            # kill mid-trial: a trial has finished and another is running (not between two trials)
+            if db is not None and _count_finished(db) >= 1 and _trial_numbers(db, ("RUNNING",)):
                 break
             time.sleep(0.2)
     finally:
@@ -401,6 +408,8 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     storage = str(db)
     before = _finished_trials(storage)
     assert 1 <= len(before) < 4
+    running_when_killed = _trial_numbers(db, ("RUNNING",))
+    assert running_when_killed
 
     cli.main(args)  # the same command again
 
@@ -409,7 +418,7 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     assert {n: after[n] for n in before} == before  # nothing finished was lost or changed
     assert len(after) == 4
     lost = [t for t in study.trials if "lost" in t.user_attrs]
-    assert lost and all(t.state == TrialState.FAIL for t in lost)
+    assert [t.number for t in lost] == running_when_killed and all(t.state == TrialState.FAIL for t in lost)
     retries = {t.user_attrs["retry_of"]: t for t in study.get_trials(states=FINISHED) if "retry_of" in t.user_attrs}
     assert sorted(retries) == sorted(t.number for t in lost)  # each lost trial re-run exactly once
     for trial in lost:
