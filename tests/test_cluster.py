@@ -199,9 +199,9 @@ def test_search_on_postgresql_survives_a_killed_worker(tmp_path: Path):
 
         def mid_trial() -> bool:
             """True once both workers have taken trials, one trial is complete and another is
-            RUNNING with an epoch reported (and every RUNNING trial names its worker: one killed
-            before that stays RUNNING until search.stale_after_minutes, since nothing tells whose
-            it was)."""
+            RUNNING with an epoch reported and at least 2 to go, so that the kill lands mid-trial
+            (and every RUNNING trial names its worker: one killed before that stays RUNNING until
+            search.stale_after_minutes, since nothing tells whose it was)."""
             if first.poll() is not None:
                 raise AssertionError(f"the search ended before the kill:\n{first_log.read_text()[-3000:]}")
             if not study:
@@ -213,7 +213,8 @@ def test_search_on_postgresql_survives_a_killed_worker(tmp_path: Path):
             trials = study[0].get_trials(deepcopy=False)
             running = [t for t in trials if t.state == TrialState.RUNNING]
             workers = {t.user_attrs.get("worker") for t in trials} - {None}
-            return (any(t.state == TrialState.COMPLETE for t in trials) and any(t.intermediate_values for t in running)
+            mid_way = [t for t in running if t.intermediate_values and max(t.intermediate_values) <= epochs - 2]
+            return (any(t.state == TrialState.COMPLETE for t in trials) and bool(mid_way)
                     and all("worker" in t.user_attrs for t in running) and len(workers) == 2)
 
         tic = time.monotonic()
@@ -223,9 +224,9 @@ def test_search_on_postgresql_survives_a_killed_worker(tmp_path: Path):
             kill_group(first)  # the search and both of its worker processes
         before = {t.number: (t.value, t.params) for t in study[0].get_trials(states=(TrialState.COMPLETE,))}
         reported = {t.number: max(t.intermediate_values, default=0) for t in study[0].get_trials(
-            states=(TrialState.RUNNING,))}  # a reported epoch has its checkpoint
+            states=(TrialState.RUNNING,)) if "worker" in t.user_attrs}  # a reported epoch has its checkpoint
         killed = sorted(reported)
-        assert before and killed
+        assert before and killed, first_log.read_text()[-2000:]
 
         print(f"search killed after {time.monotonic() - tic:.0f} s")
         tic = time.monotonic()

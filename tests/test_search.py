@@ -386,6 +386,28 @@ def _count_finished(db: Path) -> int:
     return len(_trial_numbers(db, ("COMPLETE", "PRUNED")))
 
 
+def _running_trials(db: Path) -> dict[int, tuple[int | None, bool]]:
+    """The RUNNING trials: number -> (last epoch reported or None, whether it names its worker)."""
+    try:
+        with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=30) as connection:
+            rows = connection.execute(
+                "SELECT t.number, (SELECT MAX(v.step) FROM trial_intermediate_values v WHERE v.trial_id = t.trial_id), "
+                "EXISTS (SELECT 1 FROM trial_user_attributes a WHERE a.trial_id = t.trial_id AND a.key = 'worker') "
+                "FROM trials t WHERE t.state = 'RUNNING'").fetchall()
+    except sqlite3.OperationalError:  # not created yet
+        return {}
+    return {number: (last, bool(named)) for number, last, named in rows}
+
+
+def _killable_mid_trial(db: Path, epochs: int) -> bool:
+    """Whether a kill now lands mid-trial: a trial is finished, one RUNNING has at least 2 of its
+    ``epochs`` to go, and every RUNNING trial names its worker (one killed before that stays
+    RUNNING until search.stale_after_minutes, since nothing tells whose it was)."""
+    running = _running_trials(db)
+    return (_count_finished(db) >= 1 and all(named for _, named in running.values())
+            and any(last is None or last <= epochs - 2 for last, _ in running.values()))
+
+
 def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     args = ["search=ci", "search.n_trials=4", "search.pruner.kind=none", *tiny_search(tmp_path)]
     code = "import sys; from sweeps.search.cli import main; main(sys.argv[1:])"
@@ -397,8 +419,7 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     try:
         while time.monotonic() < deadline and first.poll() is None:
             db = next((tmp_path / "search").glob("*.db"), None) if (tmp_path / "search").exists() else None
-            # kill mid-trial: a trial has finished and another is running (not between two trials)
-            if db is not None and _count_finished(db) >= 1 and _trial_numbers(db, ("RUNNING",)):
+            if db is not None and _killable_mid_trial(db, epochs=4):
                 break
             time.sleep(0.2)
     finally:
@@ -408,8 +429,8 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     storage = str(db)
     before = _finished_trials(storage)
     assert 1 <= len(before) < 4
-    running_when_killed = _trial_numbers(db, ("RUNNING",))
-    assert running_when_killed
+    killed = sorted(number for number, (_, named) in _running_trials(db).items() if named)
+    assert killed, (tmp_path / "first.log").read_text()[-2000:]
 
     cli.main(args)  # the same command again
 
@@ -418,7 +439,7 @@ def test_resume_after_sigkill_loses_and_repeats_nothing(tmp_path: Path) -> None:
     assert {n: after[n] for n in before} == before  # nothing finished was lost or changed
     assert len(after) == 4
     lost = [t for t in study.trials if "lost" in t.user_attrs]
-    assert [t.number for t in lost] == running_when_killed and all(t.state == TrialState.FAIL for t in lost)
+    assert [t.number for t in lost] == killed and all(t.state == TrialState.FAIL for t in lost)
     retries = {t.user_attrs["retry_of"]: t for t in study.get_trials(states=FINISHED) if "retry_of" in t.user_attrs}
     assert sorted(retries) == sorted(t.number for t in lost)  # each lost trial re-run exactly once
     for trial in lost:
