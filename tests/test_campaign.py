@@ -299,7 +299,7 @@ def test_the_runner_keeps_jobs_runs_training_in_plan_order_across_stages(plan, t
     time on cores/jobs threads each: a run starts as soon as one ends, also across a stage's end."""
     events = tmp_path / "events"
     stand_in = ("import sys, time; events = open(sys.argv[1], 'a'); run = sys.argv[-1]; "
-                "events.write(f'start {run}\\n'); events.flush(); time.sleep(0.4 if 'seed=2' in sys.argv else 0.05); "
+                "events.write(f'start {run}\\n'); events.flush(); time.sleep(1.0 if 'seed=2' in sys.argv else 0.05); "
                 "events.write(f'end {run}\\n'); print('sweep', *sys.argv[2:])")
     monkeypatch.setattr(campaign, "SWEEP", [sys.executable, "-c", stand_in, str(events)])
     monkeypatch.setattr(campaign, "POLL_SECONDS", 0.02)
