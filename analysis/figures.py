@@ -85,7 +85,7 @@ def _lines(text: str) -> int:
 def _config_table(analysis: Analysis) -> pd.DataFrame:
     """One row per config (its schedule and reward weights), in config order."""
     return (analysis.runs.drop_duplicates("config").set_index("config")
-            .loc[:, ["schedule", "eps", "beta1", "beta2", "lambda_r", "lambda_h", "mep", "total_epochs", "mu_eps"]]
+            .loc[:, ["schedule", "eps", "beta1", "beta2", "lambda_r", "lambda_h", "mep", "total_epochs"]]
             .sort_index())
 
 
@@ -480,7 +480,10 @@ def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_
 def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 12: per task, mu_eps against beta1 for each beta2 present (eq. 10 and 11), the
     optimal band shaded, one marker per decay configuration coloured by its final median success."""
-    summary = analysis.summary.merge(_config_table(analysis).reset_index(), on="config")
+    complete = analysis.runs[analysis.runs["complete"]]
+    mean_rates = complete.groupby(["task", "config"], observed=True)["mu_eps"].median().reset_index()
+    summary = (analysis.summary.merge(_config_table(analysis).reset_index(), on="config")
+               .merge(mean_rates, on=["task", "config"]))
     decays = summary[summary["schedule"] != "constant"]
     beta2_colours = {beta2: PALETTE[i % len(PALETTE)]
                      for i, beta2 in enumerate(sorted(set(decays.loc[decays["schedule"].isin(FIXED_KINDS), "beta2"])))}
@@ -489,7 +492,8 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
         caption = (f"{task_title(task)}: mean relabel rate μ_ε over training against β1, one line per β2 of the runs "
                    "(solid: exact mean over K epochs, eq. 10; dotted: continuous approximation, eq. 11). The grey "
                    f"band is the best fixed ε of HER, {MU_EPS_BAND[0]} to {MU_EPS_BAND[1]}. Each marker is one decay "
-                   "configuration (diamonds: success-driven rates, at the mean of the rates they logged), coloured "
+                   "configuration (diamonds: success-driven rates, at the median over complete seeds of each seed's "
+                   "mean logged rate), coloured "
                    "by its final median test success (see the summary table).")
         found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: μ_ε against β1 (Fig. 12)", caption,
                                   partial(_draw_mean_rate, task, summary[summary["task"] == task], beta2_colours)))
@@ -529,7 +533,7 @@ def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float,
     decays = summary[summary["schedule"] != "constant"]
     fixed = decays["schedule"].isin(FIXED_KINDS)
     for marker, kinds, label in (("o", fixed, "decay schedule (eq. 10 μ_ε)"),
-                                 ("D", ~fixed, "success-driven rate (mean of its logged rates)")):
+                                 ("D", ~fixed, "success-driven rate (median over seeds of each seed's mean logged rate)")):
         if kinds.any():  # the marker kinds; their colours are the colour bar's
             axes[0].scatter([], [], marker=marker, s=50, facecolors="white", edgecolors="black",
                             label=_legend_label(label))

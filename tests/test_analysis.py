@@ -487,10 +487,26 @@ def test_the_mean_rate_figure_names_the_marker_kinds_it_draws(tmp_path, with_suc
     figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
     labels = [text.get_text().replace("\n", " ") for text in figure.legends[0].get_texts()]
     markers = [label for label in labels if label.startswith(("decay schedule", "success-driven"))]
-    assert markers == ["decay schedule (eq. 10 μ_ε)"] + (["success-driven rate (mean of its logged rates)"]
-                                                        if with_success else [])
+    assert markers == ["decay schedule (eq. 10 μ_ε)"] + (
+        ["success-driven rate (median over seeds of each seed's mean logged rate)"] if with_success else [])
     drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
     assert [len(collection.get_offsets()) for collection in drawn] == [1] * (1 + with_success)  # circles, diamonds
+
+
+def test_the_success_driven_rate_sits_at_the_median_of_its_complete_seeds_mean_rates(tmp_path):
+    """Each seed of a success-driven rate logs its own rates; the diamond sits at the median over
+    the complete seeds of each seed's mean rate, an unfinished seed left out."""
+    success = ScheduleConfig(kind="success", beta1=0.5, window=1)
+    curves = {0: [0.0] * 6, 1: [0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 2: [1.0] * 6}
+    for seed, curve in curves.items():
+        write_run(tmp_path / f"success{seed}", make_config(schedule=success, seed=seed), np.array(curve))
+    write_run(tmp_path / "success3", make_config(schedule=success, seed=3), np.ones(3), complete=False)
+    table = load_runs(tmp_path)
+    rates = table.runs.set_index("seed")["mu_eps"]
+    assert rates[0] > rates[1] > rates[2] and rates[3] < rates[1]  # the seeds' rates differ
+    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
+    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
+    assert [tuple(point) for point in drawn[0].get_offsets()] == [(0.5, pytest.approx(rates[1]))]
 
 
 
