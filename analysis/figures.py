@@ -533,7 +533,7 @@ def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float,
     decays = summary[summary["schedule"] != "constant"]
     fixed = decays["schedule"].isin(FIXED_KINDS)
     for marker, kinds, label in (("o", fixed, "decay schedule (eq. 10 μ_ε)"),
-                                 ("D", ~fixed, "success-driven rate (median over seeds of each seed's mean logged rate)")):
+                                 ("D", ~fixed, "success-driven rate (median over seeds of μ_ε)")):
         if kinds.any():  # the marker kinds; their colours are the colour bar's
             axes[0].scatter([], [], marker=marker, s=50, facecolors="white", edgecolors="black",
                             label=_legend_label(label))

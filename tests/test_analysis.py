@@ -488,7 +488,7 @@ def test_the_mean_rate_figure_names_the_marker_kinds_it_draws(tmp_path, with_suc
     labels = [text.get_text().replace("\n", " ") for text in figure.legends[0].get_texts()]
     markers = [label for label in labels if label.startswith(("decay schedule", "success-driven"))]
     assert markers == ["decay schedule (eq. 10 μ_ε)"] + (
-        ["success-driven rate (median over seeds of each seed's mean logged rate)"] if with_success else [])
+        ["success-driven rate (median over seeds of μ_ε)"] if with_success else [])
     drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
     assert [len(collection.get_offsets()) for collection in drawn] == [1] * (1 + with_success)  # circles, diamonds
 
