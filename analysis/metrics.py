@@ -15,6 +15,7 @@ Vocabulary (each formula is restated in docs/ANALYSIS.md):
 from __future__ import annotations
 
 import warnings
+from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,13 @@ SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "au
 
 RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix in ("", "raw_")
                                   for threshold in SUCCESS_THRESHOLDS)]
+
+# scipy.stats.permutation_test enumerates every split of the seeds when there are at most this many
+# (5 seeds against 5: 252), and otherwise draws this many at random from a seeded generator.
+PERMUTATION_RESAMPLES = 9999
+PERMUTATION_BATCH = 64  # splits evaluated at once: bounds memory for a large grid (~ batch x pairs x seeds floats)
+PERMUTATION_COLUMNS = ["task", "config", "versus", "seeds", "versus_seeds",
+                       *(f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS)]
 
 SMOOTHED_DECIMALS = 12  # far finer than any success rate (a fraction of test episodes), far coarser than float noise
 
@@ -237,6 +245,57 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
                                                     f"p_improve_{BASELINE}"])
 
 
+def _outcomes_higher_is_better(runs: pd.DataFrame, outcomes: pd.DataFrame) -> dict[tuple[str, str], tuple]:
+    """(task, config) -> ((learner, K), its complete seeds' RUN_OUTCOME_COLUMNS of shape (5, n_seeds)), each
+    signed so that higher is better: final as is, epochs to a threshold negated, ``never`` counted as
+    K + 1 epochs. Only configurations with at least two complete seeds, all with the same learner and K."""
+    complete = runs.loc[runs["complete"], [*GROUP, "run", "learner", "total_epochs"]].merge(outcomes, on="run")
+    never = complete["total_epochs"].astype(float) + 1.0
+    values = np.column_stack([complete["final"].to_numpy(float),
+                              *(-complete[column].astype(float).fillna(never).to_numpy()
+                                for column in RUN_OUTCOME_COLUMNS[1:])])  # (n_runs, 5)
+    grouped = complete.groupby(GROUP, observed=True)
+    setups = grouped[["learner", "total_epochs"]]
+    one_setup, first = (setups.nunique() == 1).all(axis=1), setups.first()
+    return {key: (tuple(first.loc[key]), values[rows].T) for key, rows in grouped.indices.items()
+            if len(rows) >= 2 and one_setup[key]}
+
+
+def permutation_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+    """One-sided permutation tests between the complete seeds of every ordered pair (config, versus) of
+    configurations of a task with the same learner and K, each with at least two complete seeds.
+
+    ``runs``: the run table; ``outcomes``: :func:`run_outcomes`. Columns PERMUTATION_COLUMNS: seeds /
+    versus_seeds count each side's seeds; p_<outcome> is the p-value of "config does better than versus"
+    on that outcome (higher final; fewer epochs to a threshold, ``never`` counted as K + 1) for the
+    difference of the means over seeds: scipy.stats.permutation_test, exact when the seeds allow at
+    most PERMUTATION_RESAMPLES splits, else that many random ones drawn from ``seed``.
+    """
+    from scipy import stats
+
+    signed = _outcomes_higher_is_better(runs, outcomes)
+    by_sizes = defaultdict(list)  # pairs with the same seed counts share one vectorised test
+    for first, (setup, values) in signed.items():
+        for second, (other_setup, other_values) in signed.items():
+            if first != second and first[0] == second[0] and setup == other_setup:
+                by_sizes[(values.shape[1], other_values.shape[1])].append((first, second))
+    rows = []
+    for (seeds, versus_seeds), pairs in by_sizes.items():
+        x = np.concatenate([signed[first][1] for first, _ in pairs])  # (5 * pairs, seeds)
+        y = np.concatenate([signed[second][1] for _, second in pairs])  # (5 * pairs, versus_seeds)
+        result = stats.permutation_test((x, y), lambda a, b, axis: a.mean(axis=axis) - b.mean(axis=axis),
+                                        permutation_type="independent", vectorized=True, alternative="greater",
+                                        n_resamples=PERMUTATION_RESAMPLES, batch=PERMUTATION_BATCH, axis=-1,
+                                        rng=np.random.default_rng(seed))
+        for ((task, config), (_, versus)), p_values in zip(pairs, result.pvalue.reshape(len(pairs), -1)):
+            rows.append({"task": task, "config": config, "versus": versus, "seeds": seeds,
+                         "versus_seeds": versus_seeds, **dict(zip(PERMUTATION_COLUMNS[5:], p_values.tolist()))})
+    table = pd.DataFrame.from_records(rows, columns=PERMUTATION_COLUMNS)
+    order = {config: rank for rank, config in enumerate(runs["config"].cat.categories)}
+    ranks = [table["task"].map(task_rank), table["config"].map(order), table["versus"].map(order)]
+    return table.iloc[np.lexsort(tuple(reversed([rank.to_numpy() for rank in ranks])))].reset_index(drop=True)
+
+
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:
     """Per (task, config, epoch): the median over seeds of each minibatch share (SHARE_COLUMNS),
     rescaled so the three sum to 1 (they stack to the whole minibatch), and n_seeds."""
@@ -323,7 +382,8 @@ class Analysis:
     runs only: medians: :func:`median_curves`; summary / aggregate: the two tables; shares:
     :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
     :func:`composition_versus_paper`; window: the smoothing window in epochs; outcomes:
-    :func:`run_outcomes` of every run (each run's own numbers, the run list's).
+    :func:`run_outcomes` of every run (each run's own numbers, the run list's); tests:
+    :func:`permutation_tests` between the configurations of each task.
     """
 
     runs: pd.DataFrame
@@ -337,6 +397,7 @@ class Analysis:
     composition_vs_paper: pd.DataFrame
     window: int
     outcomes: pd.DataFrame
+    tests: pd.DataFrame
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
@@ -344,9 +405,10 @@ def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = B
     curves = smoothed_curves(epochs, window)
     complete_curves, complete_epochs = curves[curves["complete"]], epochs[epochs["complete"]]
     shares = composition(complete_epochs)
+    outcomes = run_outcomes(curves)
     return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(complete_curves),
                     summary=summary_table(complete_curves, runs, seed=seed),
                     aggregate=aggregate_table(complete_curves, runs, seed=seed), shares=shares,
                     q_means=mean_q(complete_epochs),
                     composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window,
-                    outcomes=run_outcomes(curves))
+                    outcomes=outcomes, tests=permutation_tests(runs, outcomes, seed=seed))

@@ -8,6 +8,7 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/summary.csv|.md       per task x configuration
     tables/aggregate.csv|.md     per configuration across tasks
     tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
+    tables/permutation_tests.csv|.md  per task, one-sided permutation tests between configurations' seeds
     tables/runs.csv              the runs behind them
     search/<study>_*             each Optuna study's beta-plane figure and best trials
 
@@ -50,6 +51,7 @@ FORMATS = ("png", "svg", "pdf")
 DPI = 100
 FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
 MIME = {"png": "image/png", "svg": "image/svg+xml"}
+PAGE_TEST_ROWS = 60  # more permutation tests than this stay in their table files
 RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", *RUN_OUTCOME_COLUMNS,
                     "cpu", "damaged", "run_id"]
 TABLE_NOTES = {
@@ -72,6 +74,13 @@ TABLE_NOTES = {
              "at its last epoch so far; <b>epochs_to_0.5 / 0.9</b> and <b>raw_epochs_to_0.5 / 0.9</b>, the first "
              "epoch its smoothed curve and its raw test success reach them (empty: not reached); <b>cpu</b>, the "
              "CPU its log records (empty for logs that predate it)."),
+    "tests": ("One row per ordered pair of configurations of a task with the same learner and K, each with at "
+              "least two complete seeds: <b>p_final</b>, <b>p_epochs_to_0.5 / 0.9</b>, <b>p_raw_epochs_to_0.5 / "
+              "0.9</b> are one-sided permutation-test p-values (scipy.stats.permutation_test, difference of the "
+              "means over seeds) that <b>config</b> does better than <b>versus</b>: higher final success, fewer "
+              "epochs to a threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
+              "two sides' seeds (5 against 5: 252, so the smallest p is 1/252), or 9999 seeded random splits "
+              "when there are more. Each line is one test; reading many at once, expect some small p by chance."),
     "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
                     f"{task_title(PAPER_COMPOSITION_TASK)} with HER: the paper's numbers (Fig. 2, Sec. III) beside "
                     f"this data's median over the seeds that reached epoch {PAPER_COMPOSITION_EPOCH}, rescaled to "
@@ -196,7 +205,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                      + "</ul>")
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
               html_table(analysis.summary), "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
-              html_table(analysis.aggregate), "<h2>Figures</h2>"]
+              html_table(analysis.aggregate), *_tests_html(analysis.tests), "<h2>Figures</h2>"]
     placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
         parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
@@ -216,6 +225,18 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", html_table(_run_list(analysis)[RUN_LIST_COLUMNS])]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def _tests_html(tests: pd.DataFrame) -> list[str]:
+    """The permutation tests' part of the page: the table when it has at most PAGE_TEST_ROWS rows, else
+    where to read it; nothing when no pair of configurations has two seeds each."""
+    if tests.empty:
+        return []
+    parts = ["<h2>Permutation tests between configurations</h2>", f"<p>{TABLE_NOTES['tests']}</p>"]
+    if len(tests) <= PAGE_TEST_ROWS:
+        return parts + [html_table(tests)]
+    return parts + [f"<p>{len(tests)} tests: too many for this page; they are in tables/permutation_tests.md "
+                    "and .csv.</p>"]
 
 
 def _run_list(analysis: Analysis) -> pd.DataFrame:
@@ -321,6 +342,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     tables = {"summary": analysis.summary, "aggregate": analysis.aggregate}
     if not analysis.composition_vs_paper.empty:
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
+    if not analysis.tests.empty:
+        tables["permutation_tests"] = analysis.tests
     written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"

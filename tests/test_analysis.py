@@ -4,6 +4,7 @@ the report command."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import subprocess
 import sys
@@ -160,14 +161,16 @@ def test_runs_in_progress_enter_no_statistic(tmp_path):
     assert summary.loc["HER", "final_median"] == pytest.approx((0.8 + 2.6 / 3) / 2)  # seeds 0 and 1 at epoch 6
     assert summary.loc["linear b1=0.5", "p_improve_HER"] == pytest.approx(2 / 4)  # 0.95 beats both, 0.2 neither
     assert list(midway.aggregate["config"]) == ["HER", "linear b1=0.5"]
-    for name in ("summary", "aggregate", "medians", "shares", "q_means"):
+    assert midway.tests[["config", "versus", "seeds", "versus_seeds"]].values.tolist() == [
+        ["HER", "linear b1=0.5", 2, 2], ["linear b1=0.5", "HER", 2, 2]]
+    for name in ("summary", "aggregate", "medians", "shares", "q_means", "tests"):
         pd.testing.assert_frame_equal(_comparable(getattr(midway, name)), _comparable(getattr(alone, name)))
     assert (midway.medians["n_seeds"] == 2).all()
 
 
 def _comparable(table: pd.DataFrame) -> pd.DataFrame:
     """A table without what names the runs left out (their count, the categories of their labels)."""
-    return table.drop(columns="in_progress", errors="ignore").astype({"config": str})
+    return table.drop(columns="in_progress", errors="ignore").astype({"config": str}, errors="ignore")
 
 
 def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path):
@@ -408,6 +411,18 @@ def test_report_writes_tables_figures_and_self_contained_html(sweep, tmp_path, c
     assert (out / "tables" / "summary.md").read_text(encoding="utf-8").startswith("| task | config |")
     runs = pd.read_csv(out / "tables" / "runs.csv")
     assert len(runs) == 32 and page.count("run.mcap") >= 32
+    tests = pd.read_csv(out / "tables" / "permutation_tests.csv")
+    assert len(tests) == 2 * 8 * 7  # per task, every ordered pair of its 8 configurations
+    assert "112 tests: too many for this page; they are in tables/permutation_tests.md" in page
+
+
+def test_the_report_page_shows_a_short_list_of_permutation_tests(tmp_path):
+    write_campaign_midway(tmp_path / "logs")
+    assert report_main([str(tmp_path / "logs"), "--out", str(tmp_path / "report")]) == 0
+    page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
+    assert "<h2>Permutation tests between configurations</h2>" in page and "<th>p_final</th>" in page
+    tests = (tmp_path / "report" / "tables" / "permutation_tests.md").read_text(encoding="utf-8")
+    assert tests.splitlines()[2].startswith("| push | HER | linear b1=0.5 | 2 | 2 |")
 
 
 def test_report_filters_and_svg(sweep, tmp_path):
@@ -610,6 +625,51 @@ def test_push_summary_equals_hand_values(push_analysis):
     her_median = np.median([[min(max(k - step, 0), 50) / 50 for k in range(1, 151)] for step in PUSH_STEPS["HER"]],
                            axis=0)
     assert summary.loc["HER", "auc"] == pytest.approx(her_median.mean())
+
+
+def test_permutation_tests_equal_an_enumeration_of_every_split_of_the_seeds(push_analysis):
+    """Every ordered pair of the three configurations (3 seeds each: 20 splits), each outcome: the share of
+    splits whose difference of means is at least the observed one, "better" meaning higher final success
+    and fewer epochs, a seed that never reaches a threshold counted as K + 1 = 151 epochs."""
+    outcomes = push_analysis.outcomes.merge(push_analysis.runs[["run", "config"]], on="run")
+    columns = ["final", "epochs_to_0.5", "epochs_to_0.9", "raw_epochs_to_0.5", "raw_epochs_to_0.9"]
+    signed = {config: np.array([[value if column == "final" else -(PUSH_EPOCHS + 1 if pd.isna(value) else value)
+                                 for value in group[column]] for column in columns])
+              for config, group in outcomes.groupby("config", observed=True)}
+    tests = push_analysis.tests.astype({"config": str, "versus": str}).set_index(["config", "versus"])
+    assert len(tests) == 6
+    for (config, versus), row in tests.iterrows():
+        x, y = signed[config], signed[versus]
+        pooled = np.concatenate([x, y], axis=1)
+        splits = [np.isin(np.arange(6), chosen) for chosen in itertools.combinations(range(6), x.shape[1])]
+        observed = x.mean(axis=1) - y.mean(axis=1)
+        differences = np.array([pooled[:, chosen].mean(axis=1) - pooled[:, ~chosen].mean(axis=1) for chosen in splits])
+        expected = (differences >= observed - 1e-9).mean(axis=0)
+        assert row[[f"p_{column}" for column in columns]].tolist() == pytest.approx(expected.tolist()), (config, versus)
+    # By hand: the control's raw 0.5 at epochs 46, 56, 71 against HER's 51, 61, 81; of the 20 ways to
+    # pick three of the six, 6 sum to at most 46 + 56 + 71 = 173.
+    assert tests.loc[("HER eps=0.874375", "HER"), "p_raw_epochs_to_0.5"] == pytest.approx(6 / 20)
+    # Every seed of HER reaches 0.9 on its smoothed curve; none of linear's third (step 120): the
+    # "never" (151) makes linear worse, not absent.
+    assert tests.loc[("HER", "linear b1=0.25"), "p_epochs_to_0.9"] < tests.loc[("linear b1=0.25", "HER"),
+                                                                              "p_epochs_to_0.9"]
+
+
+def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and_k(tmp_path):
+    """HER and linear at K = 6 (two seeds each), HER at K = 8 (two seeds), linear at K = 8 (one seed):
+    only the two K = 6 configurations are tested, against each other."""
+    linear = ScheduleConfig("linear", beta1=0.5)
+    for seed in (0, 1):
+        write_run(tmp_path / f"her6-{seed}", make_config(seed=seed), np.full(6, 0.2 + 0.1 * seed))
+        write_run(tmp_path / f"linear6-{seed}", make_config(schedule=linear, seed=seed), np.full(6, 0.9))
+        write_run(tmp_path / f"her8-{seed}", make_config(seed=seed, epochs=8), np.full(8, 1.0))
+    write_run(tmp_path / "linear8", make_config(schedule=linear, epochs=8), np.full(8, 0.9))
+    tests = metrics.analyse(*_tables(tmp_path), WINDOW).tests.set_index(["config", "versus"])
+    assert list(tests.index) == [("HER (epochs=6)", "linear b1=0.5 (epochs=6)"),
+                                 ("linear b1=0.5 (epochs=6)", "HER (epochs=6)")]
+    # 0.9, 0.9 against 0.2, 0.3: of the 6 splits only the observed one is as favourable.
+    assert tests.loc[("linear b1=0.5 (epochs=6)", "HER (epochs=6)"), "p_final"] == pytest.approx(1 / 6)
+    assert tests.loc[("HER (epochs=6)", "linear b1=0.5 (epochs=6)"), "p_final"] == pytest.approx(1.0)
 
 
 def stats_trim_mean(values: list[float]) -> float:
