@@ -49,6 +49,7 @@ RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix 
 # scipy.stats.permutation_test enumerates every split of the seeds when there are at most this many
 # (5 seeds against 5: 252), and otherwise draws this many at random from a seeded generator.
 PERMUTATION_RESAMPLES = 9999
+STATISTIC_DECIMALS = 10  # the permutation tests' mean differences: see _mean_difference
 PERMUTATION_BATCH = 64  # splits evaluated at once: bounds memory for a large grid (~ batch x pairs x seeds floats)
 PERMUTATION_COLUMNS = ["task", "config", "versus", "seeds", "versus_seeds",
                        *(f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS)]
@@ -248,17 +249,22 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
 def _outcomes_higher_is_better(runs: pd.DataFrame, outcomes: pd.DataFrame) -> dict[tuple[str, str], tuple]:
     """(task, config) -> ((learner, K), its complete seeds' RUN_OUTCOME_COLUMNS of shape (5, n_seeds)), each
     signed so that higher is better: final as is, epochs to a threshold negated, ``never`` counted as
-    K + 1 epochs. Only configurations with at least two complete seeds, all with the same learner and K."""
+    K + 1 epochs. Only configurations with at least two complete seeds (a configuration's label names
+    its learner and K, so all its runs share them)."""
     complete = runs.loc[runs["complete"], [*GROUP, "run", "learner", "total_epochs"]].merge(outcomes, on="run")
     never = complete["total_epochs"].astype(float) + 1.0
     values = np.column_stack([complete["final"].to_numpy(float),
                               *(-complete[column].astype(float).fillna(never).to_numpy()
                                 for column in RUN_OUTCOME_COLUMNS[1:])])  # (n_runs, 5)
     grouped = complete.groupby(GROUP, observed=True)
-    setups = grouped[["learner", "total_epochs"]]
-    one_setup, first = (setups.nunique() == 1).all(axis=1), setups.first()
-    return {key: (tuple(first.loc[key]), values[rows].T) for key, rows in grouped.indices.items()
-            if len(rows) >= 2 and one_setup[key]}
+    setups = grouped[["learner", "total_epochs"]].first()
+    return {key: (tuple(setups.loc[key]), values[rows].T) for key, rows in grouped.indices.items() if len(rows) >= 2}
+
+
+def _mean_difference(x: np.ndarray, y: np.ndarray, axis: int) -> np.ndarray:
+    """mean(x) - mean(y) along ``axis``, rounded to STATISTIC_DECIMALS: sides with equal means (the same
+    seeds' values summed in another order) differ by float noise that would break their tie."""
+    return np.round(x.mean(axis=axis) - y.mean(axis=axis), STATISTIC_DECIMALS)
 
 
 def permutation_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
@@ -275,25 +281,25 @@ def permutation_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, seed: int = BO
 
     signed = _outcomes_higher_is_better(runs, outcomes)
     by_sizes = defaultdict(list)  # pairs with the same seed counts share one vectorised test
-    for first, (setup, values) in signed.items():
-        for second, (other_setup, other_values) in signed.items():
-            if first != second and first[0] == second[0] and setup == other_setup:
-                by_sizes[(values.shape[1], other_values.shape[1])].append((first, second))
+    for config, (setup, values) in signed.items():
+        for versus, (versus_setup, versus_values) in signed.items():
+            if config != versus and config[0] == versus[0] and setup == versus_setup:
+                by_sizes[(values.shape[1], versus_values.shape[1])].append((config, versus))
+    p_columns = [f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS]
     rows = []
     for (seeds, versus_seeds), pairs in by_sizes.items():
-        x = np.concatenate([signed[first][1] for first, _ in pairs])  # (5 * pairs, seeds)
-        y = np.concatenate([signed[second][1] for _, second in pairs])  # (5 * pairs, versus_seeds)
-        result = stats.permutation_test((x, y), lambda a, b, axis: a.mean(axis=axis) - b.mean(axis=axis),
-                                        permutation_type="independent", vectorized=True, alternative="greater",
-                                        n_resamples=PERMUTATION_RESAMPLES, batch=PERMUTATION_BATCH, axis=-1,
-                                        rng=np.random.default_rng(seed))
+        x = np.concatenate([signed[config][1] for config, _ in pairs])  # (5 * pairs, seeds)
+        y = np.concatenate([signed[versus][1] for _, versus in pairs])  # (5 * pairs, versus_seeds)
+        result = stats.permutation_test((x, y), _mean_difference, permutation_type="independent", vectorized=True,
+                                        alternative="greater", n_resamples=PERMUTATION_RESAMPLES,
+                                        batch=PERMUTATION_BATCH, axis=-1, rng=np.random.default_rng(seed))
         for ((task, config), (_, versus)), p_values in zip(pairs, result.pvalue.reshape(len(pairs), -1)):
             rows.append({"task": task, "config": config, "versus": versus, "seeds": seeds,
-                         "versus_seeds": versus_seeds, **dict(zip(PERMUTATION_COLUMNS[5:], p_values.tolist()))})
+                         "versus_seeds": versus_seeds, **dict(zip(p_columns, p_values.tolist()))})
     table = pd.DataFrame.from_records(rows, columns=PERMUTATION_COLUMNS)
     order = {config: rank for rank, config in enumerate(runs["config"].cat.categories)}
-    ranks = [table["task"].map(task_rank), table["config"].map(order), table["versus"].map(order)]
-    return table.iloc[np.lexsort(tuple(reversed([rank.to_numpy() for rank in ranks])))].reset_index(drop=True)
+    ranks = {"task": task_rank, "config": order.get, "versus": order.get}
+    return table.sort_values(list(ranks), key=lambda column: column.map(ranks[column.name])).reset_index(drop=True)
 
 
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:

@@ -8,6 +8,7 @@ import itertools
 import math
 import subprocess
 import sys
+from fractions import Fraction
 from pathlib import Path
 from unittest import mock
 
@@ -670,6 +671,25 @@ def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and
     # 0.9, 0.9 against 0.2, 0.3: of the 6 splits only the observed one is as favourable.
     assert tests.loc[("linear b1=0.5 (epochs=6)", "HER (epochs=6)"), "p_final"] == pytest.approx(1 / 6)
     assert tests.loc[("HER (epochs=6)", "linear b1=0.5 (epochs=6)"), "p_final"] == pytest.approx(1.0)
+
+
+def test_permutation_tests_keep_sides_with_equal_means_tied():
+    """HER and linear with the same four final successes in another seed order: each side's p for doing
+    better is the exact share of the 70 splits whose difference of means is >= 0, counted in fractions
+    (float sums in another order differ by ~1e-17, which would break the ties)."""
+    finals = ["0.69", "0.32", "0.61", "0.8"]
+    linear_order = [2, 0, 3, 1]
+    runs = pd.DataFrame({"task": "push", "run": [f"r{i}" for i in range(8)], "learner": "ddpg", "total_epochs": 6,
+                         "complete": True, "config": pd.Categorical(["HER"] * 4 + ["linear b1=0.5"] * 4)})
+    values = [float(finals[i]) for i in range(4)] + [float(finals[i]) for i in linear_order]
+    outcomes = pd.DataFrame({"run": runs["run"], "final": values, **{column: pd.array([3] * 8, dtype="Int64")
+                             for column in metrics.RUN_OUTCOME_COLUMNS[1:]}})
+    pooled = [Fraction(value) for value in finals * 2]
+    splits = list(itertools.combinations(range(8), 4))
+    at_least_tied = sum(sum(pooled[i] for i in chosen) >= sum(pooled[:4]) for chosen in splits)
+    tests = metrics.permutation_tests(runs, outcomes)
+    assert tests["p_final"].tolist() == [pytest.approx(at_least_tied / 70)] * 2
+    assert tests["p_epochs_to_0.5"].tolist() == [1.0, 1.0]  # every seed at epoch 3: every split ties
 
 
 def stats_trim_mean(values: list[float]) -> float:
