@@ -57,8 +57,24 @@ EPOCH_FIELDS: dict[str, tuple[str, str]] = {
     "alpha": ("number", "SAC's entropy temperature at the end of the epoch (null for other learners)"),
     "policy_entropy": ("number", "SAC: mean -log pi(a|s) of the actor's sampled actions over this epoch's updates "
                                  "(null for other learners)"),
+    "q_real_mean": ("number", "mean critic Q(s, a) over this epoch's training rows that kept the episode's real goal "
+                              "(null if none, or in logs written before it was recorded)"),
+    "q_hindsight_mean": ("number", "mean critic Q(s, a) over this epoch's training rows whose goal was relabelled "
+                                   "(null if none, or in logs written before it was recorded)"),
+    **{f"{part}_{goal}_{stat}": ("integer" if stat == "count" else "number", f"bias evaluation ({goal} goals): {doc} "
+                                 "(hersd/bias.py; null at epochs without one)")
+       for goal in ("real", "hindsight")
+       for part, stat, doc in (("bias", "mean", "mean of Q(s, pi(s, g), g) minus the policy's discounted return"),
+                               ("bias", "std", "standard deviation of Q minus return"),
+                               ("bias", "count", "(state, goal) pairs evaluated"),
+                               ("return", "mean", "mean discounted return the policy obtains for g"))},
+    "bias_seconds": ("number", "seconds spent on the bias evaluation this epoch (null at epochs without one)"),
 }
-OPTIONAL_EPOCH_FIELDS = ("mep_fit_seconds", "priority_entropy", "test_distance", "alpha", "policy_entropy")
+# Fields a record may lack (logged as null): MEP's, SAC's, and those added after logs were first written.
+OPTIONAL_EPOCH_FIELDS = tuple(name for name in EPOCH_FIELDS if name not in (
+    "epoch", "relabel_rate", "test_success", "train_success", "q_mean", "q_std", "critic_loss", "actor_loss",
+    "share_hindsight", "share_real_success", "share_real_failure", "env_steps", "updates", "episodes_stored",
+    "rollout_seconds", "update_seconds", "eval_seconds", "epoch_seconds"))
 
 
 def _schema(title: str, properties: dict[str, Any], required: Iterable[str]) -> bytes:
@@ -223,6 +239,7 @@ def read_run(path: str | Path) -> RunLog:
     raw = read_records(path)
     epochs = pd.DataFrame.from_records(raw.records, columns=list(EPOCH_FIELDS))
     epochs = epochs.astype({name: "float64" for name, (kind, _) in EPOCH_FIELDS.items() if kind == "number"})
-    epochs = epochs.astype({name: "int64" for name, (kind, _) in EPOCH_FIELDS.items() if kind == "integer"})
+    epochs = epochs.astype({name: "int64" if name not in OPTIONAL_EPOCH_FIELDS else "float64"
+                            for name, (kind, _) in EPOCH_FIELDS.items() if kind == "integer"})
     return RunLog(path=raw.path, meta=raw.meta, epochs=epochs, complete=raw.complete, sessions=raw.sessions,
                   damaged=raw.damaged)
