@@ -24,6 +24,7 @@ import torch
 
 import hersd
 from hersd.config import TrainConfig
+from hersd.denormals import denormals_flushed
 from hersd.learner import GoalConditionedLearner, UpdateStats
 from hersd.envs import step_success
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
@@ -174,20 +175,6 @@ def update(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
             stats.add_update(state.agent.update(batch), batch)
         state.agent.update_targets()
     state.updates += d.batches_per_cycle
-
-
-@contextmanager
-def denormals_flushed(enabled: bool) -> Iterator[None]:
-    """Inside the block, with ``enabled``, this thread's float arithmetic treats denormals as zero
-    (x86 FTZ/DAZ through torch.set_flush_denormal); outside it, IEEE denormals as everywhere else."""
-    if not enabled:
-        yield
-        return
-    torch.set_flush_denormal(True)
-    try:
-        yield
-    finally:
-        torch.set_flush_denormal(False)
 
 
 def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
