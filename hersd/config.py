@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import List, Optional
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -260,12 +260,33 @@ class LearnerConfig:
 
 
 @dataclass
+class BiasConfig:
+    # The critic against the truth (hersd/bias.py, docs/ARCHITECTURE.md "Bias evaluation"): after the
+    # chosen epochs, Q(s_t, pi(s_t, g), g) against the discounted return the deterministic policy obtains
+    # from s_t for g, on an env and random stream of its own: not part of the run's identity or metrics.
+    epochs: List[int] = field(default_factory=lambda: [1, 2, 5, 10, 20, 30, 50, 75, 100, 150, 200])  # [] never
+    episodes: int = 4  # real-goal test episodes per evaluation; each of their states s_t (t < T) is valued
+    hindsight_pairs: int = 16  # (s_t, future achieved goal) pairs per evaluation, each valued by a rollout of its own
+    # Rewards summed into each return: the critic bootstraps through the time limit T, so returns run past
+    # it (T + 250 for Fetch's T = 50); the tail left out weighs gamma^return_steps (0.98^300 = 0.0023).
+    return_steps: int = 300
+
+    def __post_init__(self) -> None:
+        _check(all(isinstance(k, int) and k >= 1 for k in self.epochs),
+               f"bias.epochs must list epochs >= 1 ([] for never), got {list(self.epochs)}")
+        _check(self.episodes >= 1, f"bias.episodes must be >= 1, got {self.episodes}")
+        _check(self.hindsight_pairs >= 0, f"bias.hindsight_pairs must be >= 0, got {self.hindsight_pairs}")
+        _check(self.return_steps >= 1, f"bias.return_steps must be >= 1, got {self.return_steps}")
+
+
+@dataclass
 class TrainConfig:
     task: TaskConfig = field(default_factory=TaskConfig)
     algo: AlgoConfig = field(default_factory=AlgoConfig)
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     learner: LearnerConfig = field(default_factory=LearnerConfig)
+    bias: BiasConfig = field(default_factory=BiasConfig)
     seed: int = 0  # one seed, one result (every RNG is derived from it)
     epochs: int = 200  # K in eq. 9 (the paper trains 200 epochs)
     results_dir: str = "results"  # run directories are created below this folder

@@ -79,7 +79,7 @@ class DDPG(GoalConditionedLearner):
         (critic_loss + actor_loss).backward()
         self.optimizer.step()
         q = q.detach()
-        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item())
+        return UpdateStats.of(critic_loss.item(), actor_loss.item(), q, batch)
 
     def update_targets(self) -> None:
         """target <- polyak * target + (1 - polyak) * online, for actor and critic."""

@@ -64,14 +64,26 @@ def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> nn.
 
 
 class UpdateStats(NamedTuple):
-    """Per-update scalars: losses, the mean and mean square of Q(s, a) over the batch, and (SAC
-    only) the mean -log pi(a|s) of the actor's sampled actions."""
+    """Per-update scalars: losses, the mean and mean square of Q(s, a) over the batch, (SAC only) the
+    mean -log pi(a|s) of the actor's sampled actions, and Q(s, a) summed over the batch's real-goal and
+    relabelled rows (the Q split by row type)."""
 
     critic_loss: float
     actor_loss: float
     q_mean: float
     q_sq_mean: float
     entropy: Optional[float] = None
+    q_real_sum: float = 0.0
+    q_hindsight_sum: float = 0.0
+
+    @classmethod
+    def of(cls, critic_loss: float, actor_loss: float, q: torch.Tensor, batch: TransitionBatch,
+           entropy: Optional[float] = None) -> "UpdateStats":
+        """The stats of an update whose critic gave q (B, 1), detached, on ``batch``."""
+        relabelled = torch.from_numpy(batch.relabelled).to(q.device)
+        q_rows = q.squeeze(1).double()
+        return cls(critic_loss, actor_loss, q.mean().item(), torch.square(q).mean().item(), entropy,
+                   q_rows[~relabelled].sum().item(), q_rows[relabelled].sum().item())
 
 
 def frozen_q(critic: nn.Module, inputs: torch.Tensor) -> torch.Tensor:
@@ -127,6 +139,14 @@ class GoalConditionedLearner:
 
     def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: np.random.Generator) -> np.ndarray:
         raise NotImplementedError
+
+    @torch.no_grad()
+    def policy_value(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Q(s, pi(s, g), g) of the deterministic policy for obs (n, obs_dim), goal (n, goal_dim) -> (n,)
+        float64, by ``self.critic`` (the critic the actor climbs; TD3's and SAC's first twin)."""
+        action = self.act(obs, goal, explore=False, rng=None) / self.max_action
+        inputs = torch.cat([self._inputs(obs, goal), self.tensor(action.astype(np.float32))], dim=1)
+        return self.critic(inputs).squeeze(1).cpu().numpy().astype(np.float64)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
         raise NotImplementedError

@@ -6,6 +6,7 @@ the search. Light (no torch): a sweep plans hundreds of runs with it.
 - ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
 - ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
 - ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
+                      it holds that process's pid while held (:func:`lock_holder`);
 - ``policy/epoch_<k>.gif``  an animation of the policy's test episodes after epoch k (:mod:`hersd.render`);
 - ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
 
@@ -37,7 +38,7 @@ LOCK_NAME = "run.lock"
 POLICY_DIR = "policy"  # the run's policy animations: policy/epoch_<k>.gif
 # Fields that change where, how loudly or how fast a run is written, not what it computes.
 NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device",
-              "flush_denormal", "render_every")
+              "flush_denormal", "render_every", "bias")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
 HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0}
@@ -123,13 +124,38 @@ def run_state(directory: Path) -> str:
 
 @contextmanager
 def run_lock(directory: Path) -> Iterator[None]:
-    """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it."""
-    with open(directory / LOCK_NAME, "w") as lock_file:
+    """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it.
+    The holder writes its pid into the lock file (:func:`lock_holder`) and empties it on release."""
+    with open(directory / LOCK_NAME, "a+") as lock_file:  # not "w": that would empty a holder's pid
         try:
             fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise RunLockedError(f"{directory} is being run by another process") from None
-        yield
+            holder = lock_holder(directory)
+            raise RunLockedError(f"{directory} is being run by another process"
+                                 + (f" (pid {holder})" if holder else "")) from None
+        lock_file.truncate(0)
+        lock_file.write(f"{os.getpid()}\n")
+        lock_file.flush()
+        try:
+            yield
+        finally:
+            lock_file.truncate(0)
+
+
+def lock_holder(directory: Path) -> int | None:
+    """The pid of the live process holding the run's lock, as it recorded it; None when none is
+    recorded (no lock, released, or taken by hersd before locks recorded pids) or that process is gone."""
+    try:
+        pid = int((directory / LOCK_NAME).read_text().strip())
+    except (OSError, ValueError):
+        return None
+    try:
+        os.kill(pid, 0)  # signal 0: only asks whether the process exists
+    except ProcessLookupError:  # it died without releasing (kill -9): the lock is free
+        return None
+    except PermissionError:  # alive, another user's
+        pass
+    return pid
 
 
 def remove_if_unused(directory: Path, up_to: Path) -> None:

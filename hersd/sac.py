@@ -125,8 +125,7 @@ class SAC(GoalConditionedLearner):
         alpha_loss.backward()
         self.alpha_optimizer.step()
         q = q.detach()
-        return UpdateStats(critic_loss.item(), actor_loss.item(), q.mean().item(), torch.square(q).mean().item(),
-                           entropy=-log_prob.detach().mean().item())
+        return UpdateStats.of(critic_loss.item(), actor_loss.item(), q, batch, entropy=-log_prob.detach().mean().item())
 
     def update_targets(self) -> None:
         """Polyak-move both critics' targets (SAC has no actor target)."""

@@ -87,7 +87,7 @@ class TD3(GoalConditionedLearner):
         loss.backward()
         self.optimizer.step()
         q = q.detach()
-        return UpdateStats(critic_loss, self.last_actor_loss, q.mean().item(), torch.square(q).mean().item())
+        return UpdateStats.of(critic_loss, self.last_actor_loss, q, batch)
 
     def update_targets(self) -> None:
         """Polyak-move the actor's and both critics' targets."""

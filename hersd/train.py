@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 import hersd
+from hersd.bias import GOAL_TYPES, BiasEvaluator
 from hersd.config import TrainConfig
 from hersd.denormals import denormals_flushed
 from hersd.learner import GoalConditionedLearner, UpdateStats
@@ -101,6 +102,7 @@ class EpochStats:
         self.train_success: list[np.ndarray] = []  # one (rollouts,) bool array per cycle
         self.critic_loss = self.actor_loss = self.q_sum = self.q_sq_sum = 0.0  # summed over updates
         self.entropy_sum: float | None = None  # summed over updates by learners that report it (SAC)
+        self.q_real_sum = self.q_hindsight_sum = 0.0  # Q summed over real-goal / relabelled rows of every update
         self.n_updates = self.sampled = self.relabelled = self.real_success = 0
 
     @contextmanager
@@ -118,6 +120,8 @@ class EpochStats:
         self.q_sq_sum += stats.q_sq_mean
         if stats.entropy is not None:
             self.entropy_sum = (self.entropy_sum or 0.0) + stats.entropy
+        self.q_real_sum += stats.q_real_sum
+        self.q_hindsight_sum += stats.q_hindsight_sum
         self.n_updates += 1
         self.sampled += batch.relabelled.shape[0]
         self.relabelled += int(batch.relabelled.sum())
@@ -132,6 +136,8 @@ class EpochStats:
             "test_distance": float(test_distance.mean()),
             "train_success": float(np.concatenate(self.train_success).mean()),
             "q_mean": q_mean, "q_std": float(np.sqrt(max(q_sq_mean - q_mean ** 2, 0.0))),
+            "q_real_mean": _mean_or_none(self.q_real_sum, self.sampled - self.relabelled),
+            "q_hindsight_mean": _mean_or_none(self.q_hindsight_sum, self.relabelled),
             "critic_loss": self.critic_loss / self.n_updates, "actor_loss": self.actor_loss / self.n_updates,
             "share_hindsight": self.relabelled / self.sampled,
             "share_real_success": self.real_success / self.sampled,
@@ -144,6 +150,10 @@ class EpochStats:
             "alpha": getattr(state.agent, "alpha", None),  # SAC's temperature; the other learners have none
             "policy_entropy": None if self.entropy_sum is None else self.entropy_sum / self.n_updates,
         }
+
+
+def _mean_or_none(total: float, count: int) -> float | None:
+    return total / count if count else None
 
 
 def collect(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
@@ -258,14 +268,23 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
                 on_epoch: EpochCallback | None) -> None:
     """The epochs left, each logged, checkpointed and reported; then the completion marker."""
     _say(cfg, f"run {checkpoint_path.parent} ({f'resuming at epoch {state.epochs_done + 1}' if state.epochs_done else 'new'})")
+    bias = BiasEvaluator(cfg.bias, cfg.task, cfg.seed, state.spec.horizon, state.gamma, state.reward,
+                         cfg.flush_denormal)
     try:
         for epoch in range(state.epochs_done + 1, cfg.epochs + 1):
             record = run_epoch(state, epoch)
             check_finite(cfg, record)
+            if bias.due(epoch):
+                record |= evaluate_bias(cfg, bias, state, epoch)
             log.write_epoch(record)
             _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  eps {record['relabel_rate']:.3f}  test "
                       f"{record['test_success']:.2f}  train {record['train_success']:.2f}  Q {record['q_mean']:7.2f}  "
                       f"{record['epoch_seconds']:.1f}s")
+            if record.get("bias_seconds") is not None:
+                shown = "  ".join(f"{goal_type} {record[f'bias_{goal_type}_mean']:+.2f}" for goal_type in GOAL_TYPES
+                                  if record[f"bias_{goal_type}_mean"] is not None)
+                _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  critic bias (Q - return): {shown}  "
+                          f"({record['bias_seconds']:.1f} s)")
             if cfg.checkpoint_every and (epoch % cfg.checkpoint_every == 0 or epoch == cfg.epochs):
                 save_checkpoint(checkpoint_path, state.state_dict())
             if renders_at(cfg.render_every, epoch, cfg.epochs):
@@ -276,7 +295,20 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
         if checkpoint_path.exists() and not cfg.keep_checkpoint:
             checkpoint_path.unlink()
     finally:
+        bias.close()
         log.close()
+
+
+def evaluate_bias(cfg: TrainConfig, bias: BiasEvaluator, state: RunState, epoch: int) -> dict[str, Any]:
+    """The bias evaluation's log fields after ``epoch`` (hersd.bias); a failure is one warning line on stderr
+    and no fields, never an error: training goes on."""
+    try:
+        fields = bias.evaluate(state.agent, epoch)
+    except Exception as err:  # noqa: BLE001  (an env whose state cannot be restored: the run matters more)
+        print(f"warning: epoch {epoch}: no bias evaluation: {type(err).__name__}: {' '.join(str(err).split())[:200]}",
+              file=sys.stderr, flush=True)
+        return {}
+    return fields
 
 
 def animate(cfg: TrainConfig, state: RunState, epoch: int, directory: Path) -> None:

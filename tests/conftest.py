@@ -13,10 +13,10 @@ import pytest
 from hersd.runlog import EPOCH_FIELDS, read_run
 
 # A run small enough for a unit test: FetchReach, 2 cycles of 5 updates on 64 transitions,
-# one test round, no policy animation (tests/test_render.py renders). Learning is not expected
-# at this size; the code paths are all exercised.
+# one test round, no policy animation (tests/test_render.py renders) and no bias evaluation
+# (tests/test_bias.py evaluates). Learning is not expected at this size; the code paths are all exercised.
 TINY = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
-        "ddpg.batch_size=64", "render_every=0"]
+        "ddpg.batch_size=64", "render_every=0", "bias.epochs=[]"]
 TIMING = [name for name in EPOCH_FIELDS if name.endswith("_seconds")]  # wall-clock fields: never compared
 
 

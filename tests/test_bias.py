@@ -1,0 +1,101 @@
+"""The bias evaluation (hersd/bias.py): known returns through the time limit, hindsight goals valued by
+rollouts from the restored state, and a run's metrics and folder untouched by it."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import TINY, metrics
+
+from hersd.bias import BiasEvaluator, discounted_returns
+from hersd.compose import compose_train
+from hersd.envs import env_spec, make_env
+from hersd.goal_envs import vectorised_reward
+from hersd.runlog import read_run
+from hersd.train import train
+
+GAMMA = 0.98
+BIAS_FIELDS = [f"{part}_{goal}_{stat}" for goal in ("real", "hindsight")
+               for part, stat in (("bias", "mean"), ("bias", "std"), ("bias", "count"), ("return", "mean"))]
+
+
+class GoalSeeker:
+    """A stand-in policy for FetchReach: moves the gripper (obs[:, :3]) towards its goal at most ``speed``
+    (a share of the largest step) per step, and values every state at ``value``."""
+
+    def __init__(self, speed: float, value: float = -50.0):
+        self.speed, self.value = speed, value
+
+    def act(self, obs, goal, explore, rng):
+        action = np.zeros((obs.shape[0], 4))
+        action[:, :3] = np.clip(20.0 * (goal - obs[:, :3]), -self.speed, self.speed)
+        return action
+
+    def policy_value(self, obs, goal):
+        return np.full(obs.shape[0], self.value)
+
+
+def evaluator(*overrides: str) -> BiasEvaluator:
+    cfg = compose_train(["task=reach", *overrides])
+    env = make_env(cfg.task)
+    evaluator = BiasEvaluator(cfg.bias, cfg.task, seed=0, horizon=env_spec(env).horizon, gamma=GAMMA,
+                              reward=vectorised_reward(env))
+    env.close()
+    return evaluator
+
+
+def test_discounted_returns_sum_each_window():
+    rewards = np.array([[-1.0, 0.0, -1.0, -1.0]])
+    assert discounted_returns(rewards, 0.5, 2).tolist() == [[-1.0, -0.5, -1.5]]
+
+
+def test_returns_run_past_the_time_limit_as_the_critic_bootstraps():
+    """A policy that never succeeds (success radius 1e-9 m): every return is -sum_{j<300} gamma^j = -49.88,
+    the critic's fixed point -50 less the tail gamma^300 * 50; returns cut at the time limit T = 50 would
+    give -18.2 from t = 0 and -1 from t = 49, and any other discount or horizon another number."""
+    bias = evaluator("task.distance_threshold=1e-9", "bias.episodes=2", "bias.hindsight_pairs=0")
+    fields = bias.evaluate(GoalSeeker(speed=0.0, value=-50.0), epoch=1)
+    expected = -(1 - GAMMA ** 300) / (1 - GAMMA)
+    assert fields["return_real_mean"] == pytest.approx(expected, abs=1e-9)
+    assert fields["bias_real_mean"] == pytest.approx(-50.0 - expected, abs=1e-9)  # Q - return = -0.116
+    assert fields["bias_real_std"] == pytest.approx(0.0, abs=1e-9)
+    assert fields["bias_real_count"] == 2 * 50  # every state s_t, t < T, of both episodes
+    assert fields["bias_hindsight_count"] == 0 and fields["bias_hindsight_mean"] is None
+    bias.close()
+
+
+def test_hindsight_goals_are_valued_by_rollouts_pursuing_them_from_the_restored_state():
+    """A slow goal seeker (2.5 mm a step) passes through its future achieved goals on the way to its real
+    goal and leaves them behind; pursuing g' = ag_{t'} from the restored s_t, it is within the 5 cm radius
+    after at most t' - t steps and stays: its return is at least -sum_{j < t'-t} gamma^j. The episode's own
+    continuation (driven by the real goal) ends at the real goal, up to 25 cm away, failing for good."""
+    bias = evaluator("bias.episodes=4", "bias.hindsight_pairs=16")
+    policy = GoalSeeker(speed=0.05, value=0.0)
+    fields = bias.evaluate(policy, epoch=3)
+    assert fields["bias_hindsight_count"] == 16
+    assert -5.0 < fields["return_hindsight_mean"] <= 0.0
+    assert fields["bias_hindsight_mean"] == pytest.approx(-fields["return_hindsight_mean"])
+    assert fields["return_real_mean"] < -15.0  # the real goal is far for this slow seeker: the case discriminates
+    again = bias.evaluate(policy, epoch=3)
+    assert again | {"bias_seconds": 0} == fields | {"bias_seconds": 0}  # its own stream: the same run and epoch
+    bias.close()
+
+
+def test_the_evaluation_changes_no_metric_and_no_run_folder(tmp_path):
+    run = [o for o in TINY if o != "bias.epochs=[]"] + ["epochs=2", "seed=4", "quiet=true", "threads=1",
+                                                        "bias.episodes=1", "bias.hindsight_pairs=2"]
+    evaluated = train(compose_train([*run, "bias.epochs=[1,2]", f"results_dir={tmp_path / 'a'}"]))
+    plain = train(compose_train([*run, "bias.epochs=[]", f"results_dir={tmp_path / 'b'}"]))
+    pd.testing.assert_frame_equal(metrics(evaluated).drop(columns=BIAS_FIELDS), metrics(plain).drop(columns=BIAS_FIELDS))
+    assert evaluated.relative_to(tmp_path / "a") == plain.relative_to(tmp_path / "b")
+    logged = read_run(evaluated).epochs
+    assert logged["bias_real_count"].tolist() == [50, 50] and logged["bias_hindsight_count"].tolist() == [2, 2]
+    assert logged["bias_real_mean"].notna().all() and read_run(plain).epochs["bias_real_mean"].isna().all()
+
+
+def test_q_split_by_row_type_recombines_into_q_mean(tmp_path):
+    log = read_run(train(compose_train([*TINY, "epochs=2", "quiet=true", "threads=1", f"results_dir={tmp_path}"])))
+    epochs = log.epochs
+    share = epochs["share_hindsight"]
+    recombined = share * epochs["q_hindsight_mean"] + (1 - share) * epochs["q_real_mean"]
+    assert np.allclose(recombined, epochs["q_mean"], rtol=1e-5, atol=1e-6)
+    assert (epochs["q_hindsight_mean"] != epochs["q_real_mean"]).all()
