@@ -25,7 +25,7 @@ import pandas as pd
 
 from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, ScheduleConfig
-from hersd.runlog import EPOCH_FIELDS, LOG_NAME, RunLogError, read_records
+from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
 from hersd.runstore import HASHED_UNLESS, run_identity
 from hersd.schedules import SCHEDULE_KINDS, effective_beta2, schedule_mean_rate
 
@@ -191,9 +191,10 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
 
 
 def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:
-    """EPOCH_FIELDS name -> array over ``records``: int64 for integer fields, float64 (null -> NaN) otherwise."""
+    """EPOCH_FIELDS name -> array over ``records``: int64 for integer fields every record has, float64
+    (null or missing -> NaN) otherwise."""
     return {name: np.array([record.get(name) for record in records],
-                           dtype=np.int64 if kind == "integer" else np.float64)
+                           dtype=np.int64 if kind == "integer" and name not in OPTIONAL_EPOCH_FIELDS else np.float64)
             for name, (kind, _) in EPOCH_FIELDS.items()}
 
 
