@@ -26,6 +26,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
+from analysis.critic import critic_curves  # noqa: E402
 from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, schedule_rank  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 from hersd.schedules import FIXED_KINDS, MU_EPS_BAND, SCHEDULE_KINDS  # noqa: E402
@@ -434,6 +435,53 @@ def _draw_q(q_values: pd.DataFrame, styles: dict[str, dict]) -> Figure:
     return figure
 
 
+def critic_figures(analysis: Analysis) -> list[ReportFigure]:
+    """Fig. 10 measured: per task, the critic's bias against the policy's true return (real and hindsight
+    goals) and the mean Q of real-goal and relabelled training rows, median over complete seeds with the
+    interquartile band, for every configuration whose logs hold bias evaluations."""
+    complete = analysis.epochs[analysis.epochs["complete"]]
+    curves = critic_curves(complete)
+    curves = curves[curves["n_seeds"] > 0]
+    if curves.empty:
+        return []
+    caption = ("Top: the critic's Q(s, π(s, g), g) minus the discounted return the deterministic policy obtains "
+               "from s for g (hersd/bias.py; returns run 300 steps, past the 50-step limit the critic bootstraps "
+               "through), for the episodes' real goals and for hindsight goals (future achieved goals, each "
+               "valued by a rollout from the restored state). Bottom: mean Q(s, a) over each epoch's training "
+               "rows that kept their real goal and over the relabelled rows. Median over complete seeds, "
+               "band: interquartile range. Positive bias is overestimation.")
+    return [ReportFigure("critic_bias", "The critic against the true return (Fig. 10, measured)", caption,
+                         partial(_draw_critic, curves, config_styles(analysis)))]
+
+
+CRITIC_PANELS = (("bias_real_mean", "bias, real goals (Q − return)"),
+                 ("bias_hindsight_mean", "bias, hindsight goals (Q − return)"),
+                 ("q_real_mean", "mean Q, real-goal training rows"),
+                 ("q_hindsight_mean", "mean Q, relabelled training rows"))
+
+
+def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict]) -> Figure:
+    tasks = ordered_tasks(curves["task"])
+    legend_width = _legend_width(curves["config"].unique())
+    figure, axes = _panels(len(tasks) * len(CRITIC_PANELS), "The critic's bias and its Q by row type "
+                           "(median over seeds, interquartile band)", legend_width=legend_width, sharey=False)
+    panels = [(task, column, title) for task in tasks for column, title in CRITIC_PANELS]
+    for axis, (task, column, title) in zip(axes, panels):
+        for config, curve in curves[curves["task"] == task].groupby("config", observed=True):
+            curve = curve.dropna(subset=[f"{column}_median"])
+            style = styles[config]
+            axis.plot(curve["epoch"], curve[f"{column}_median"], label=_legend_label(config),
+                      **{**style, "linewidth": 1.1}, marker="." if column.startswith("bias") else None)
+            axis.fill_between(curve["epoch"], curve[f"{column}_q25"], curve[f"{column}_q75"],
+                              color=style.get("color"), alpha=0.15, linewidth=0)
+        if column.startswith("bias"):
+            axis.axhline(0.0, color="0.5", linewidth=0.6)
+        _set_title(axis, f"{task_title(task)}: {title}")
+    _label_outer(axes, "Q")
+    _figure_legend(figure, axes, legend_width)
+    return figure
+
+
 # --- Fig. 11: MEP ------------------------------------------------------------------------------------------------
 
 def mep_figures(analysis: Analysis) -> list[ReportFigure]:
@@ -567,6 +615,7 @@ FIGURE_BUILDERS: list[Callable[[Analysis], list[ReportFigure]]] = [
     composition_figures,
     learning_curve_figures,
     q_figures,
+    critic_figures,
     mep_figures,
     mean_rate_figures,
 ]
