@@ -16,61 +16,28 @@ import os
 import sys
 import time
 import traceback
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from omegaconf import DictConfig, open_dict
+from omegaconf import DictConfig
 
-from hersd.compose import CONFIG_PATH, group_options, register_schema, register_train_schema
-from hersd.config import ConfigError, TrainConfig, to_train_config
+from hersd.compose import CONFIG_PATH, group_options
+from hersd.config import ConfigError
 from hersd.resources import available_cores, resolve_threads
 from hersd.runstore import RunLockedError, run_dir, run_state
-from sweeps.hydra_private import grid_overrides, job_error
+from sweeps.hydra_private import job_error
+from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas  # noqa: F401
+from sweeps.status import run_status
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
 _composed = False  # set once the sweeper is reached: the command line composed into a config
 
 
-@dataclass
-class SweepConfig(TrainConfig):
-    seeds: int = 5  # grids sweep ``seed`` over range(seeds)
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.seeds < 1:
-            raise ConfigError(f"seeds must be >= 1, got {self.seeds}")
-
-
-class SweepError(RuntimeError):
-    """A sweep cannot start (a run's config is invalid: exit code 2) or ended with failed
-    runs (exit code 1)."""
-
-    def __init__(self, message: str, exit_code: int):
-        super().__init__(message)
-        self.exit_code = exit_code
-
-
-def register_schemas() -> None:
-    """``train_schema`` and ``sweep_schema`` (which conf/sweep.yaml lists first)."""
-    register_train_schema()
-    register_schema("sweep_schema", SweepConfig)
-
-
-def job_train_config(cfg: DictConfig) -> TrainConfig:
-    """A composed sweep job config (with or without its ``hydra`` node) -> its TrainConfig."""
-    cfg = cfg.copy()
-    if "hydra" in cfg:
-        with open_dict(cfg):
-            del cfg["hydra"]
-    sweep_cfg = to_train_config(cfg)
-    return TrainConfig(**{f.name: getattr(sweep_cfg, f.name) for f in fields(TrainConfig)})
-
-
 def concurrent_runs(launcher: DictConfig, n_runs: int) -> int:
     """How many of the sweep's ``n_runs`` share this machine's cores at once: joblib's n_jobs
-    (-1: one per core), all of them for submitit_local, 1 for SLURM (each job has its own
+    (-1: one per core, as joblib counts), all of them for submitit_local, 1 for SLURM (each job has its own
     allocation) and for Hydra's basic launcher (one after another)."""
     target = str(launcher.get("_target_", ""))
     if target.endswith("JoblibLauncher"):
@@ -97,17 +64,17 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         sweep_threads = job_train_config(sweeper.config).threads
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
+    check_launcher(sweeper.config.hydra.launcher)
     planned = plan_runs(sweeper, arguments)
     states = {directory: run_state(directory) for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
           f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
     if sweeper.dry_run:
-        for directory, job in planned.items():
-            print(f"  {states[directory]:<9} {directory}  [{' '.join(job)}]")
+        list_runs(planned)
         return []
 
-    to_launch = [job for directory, job in planned.items() if states[directory] != "complete"]
+    to_launch = [run.job for directory, run in planned.items() if states[directory] != "complete"]
     if not to_launch:
         return []
     threads = auto_threads(sweeper.config.hydra.launcher, len(to_launch)) if sweep_threads == "auto" else None
@@ -119,6 +86,29 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])
     return [results]
+
+
+def list_runs(planned: dict) -> None:
+    """The dry run's listing: one line per run, in launch order, with its state (:mod:`sweeps.status`),
+    directory, progress and job; then the runs training now with their pids."""
+    holders = []
+    for directory, run in planned.items():
+        state, detail = run_status(directory, run.epochs)
+        print(f"  {state:<9} {directory}  " + (f"{detail}  " if detail else "") + f"[{' '.join(run.job)}]")
+        if state == "running":
+            holders.append(detail.split("pid ", 1)[1].split(",", 1)[0])
+    if holders:
+        print(f"{len(holders)} training now (pid {', '.join(holders)})")
+
+
+def check_launcher(launcher: DictConfig) -> None:
+    """joblib's ``n_jobs`` (runs at once on this machine) must be 1 or more (SweepError, exit 2)."""
+    if not str(launcher.get("_target_", "")).endswith("JoblibLauncher"):
+        return
+    n_jobs = launcher.get("n_jobs")
+    if not isinstance(n_jobs, int) or n_jobs < 1:
+        raise SweepError(f"hydra.launcher.n_jobs={n_jobs}: give the number of runs to train at once, 1 or more, "
+                         f"or leave it out for one per core ({available_cores()} here)", exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
@@ -143,26 +133,6 @@ def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
                 else "a job died outside hersd")
         raise SweepError(f"{what}: {first_line}; finished runs are kept: run the same command again to resume "
                          f"the rest", exit_code=1) from None
-
-
-def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, list[str]]:
-    """The grid (sweeper params + command line) expanded and checked -> run dir -> its overrides,
-    in grid order; a grid naming a run twice runs it once. An invalid run config stops the sweep."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
-    overrides = parser.parse_overrides(grid_overrides(sweeper) + list(arguments))
-    jobs = [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
-    if not jobs:
-        raise SweepError("the sweep expands to no runs; give each swept key at least one value", exit_code=2)
-    planned: dict[Path, list[str]] = {}
-    for job in jobs:
-        job_cfg = sweeper.hydra_context.config_loader.load_sweep_config(sweeper.config, job)
-        try:
-            planned.setdefault(run_dir(job_train_config(job_cfg)), job)
-        except ConfigError as err:
-            raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None
-    return planned
 
 
 def report_outcomes(jobs: list[list[str]], results: list, skipped: int) -> None:
@@ -229,11 +199,39 @@ def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -
           f"({seconds:.0f} s)  ETA {eta}", flush=True)
 
 
+LAUNCHERS = ("local", "slurm", "submitit_local")  # hydra/launcher options hersd-sweep supports
+
+
+def usage() -> str:
+    """``hersd-sweep --help``: the command, its groups (those a sweep takes) and keys."""
+    groups = [f"  {'+grid' if group == 'grid' else group}={'|'.join(group_options(group))}"
+              for group in ("grid", "task", "algo", "schedule", "learner")]
+    return "\n".join([
+        "usage: hersd-sweep [+grid=NAME] [KEY=VALUE ...] [--dry-run]", "",
+        "Trains many runs (a grid x tasks x seeds) seed by seed, one per core (or on SLURM); complete",
+        "runs are skipped and interrupted ones resumed, so the same command finishes a sweep. A key",
+        "given a comma list (schedule=constant,linear) is swept. --dry-run lists each run and its state",
+        "(complete; running: epoch N of K and its pid; resumable: epoch N of K; new) without running.", "",
+        "config groups:", *groups,
+        f"  hydra/launcher={'|'.join(LAUNCHERS)}   (local: this machine, one run per core, the default)", "",
+        "keys: seeds=5 (grids sweep seed over range(seeds)), results_dir=results, hydra.launcher.n_jobs=N",
+        "(local: runs at once), every hersd-train key (hersd-train --help lists them).", "",
+        "examples:",
+        "  hersd-sweep +grid=smoke",
+        "  hersd-sweep +grid=beta task=push seeds=3 epochs=50 --dry-run",
+        "  hersd-sweep +grid=beta hydra/launcher=slurm hydra.launcher.partition=P",
+        "See README.md (Commands) and docs/ARCHITECTURE.md (sweeps/).",
+    ])
+
+
 def main() -> None:
     """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs; an
     interrupt (Ctrl-C) ends with one line and exit code 130."""
     import hydra
 
+    if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
+        print(usage())
+        return
     if "--dry-run" in sys.argv:
         sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
     register_schemas()

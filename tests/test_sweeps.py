@@ -65,7 +65,7 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
     (["+grid=nope"], "Available options in 'grid'"),
     (["task=cartpole"], "Available options in 'task'"),
     (["+grid=smoke", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
-    (["+grid=smoke", "no_such_key=1"], "keys: seed, epochs"),
+    (["+grid=smoke", "no_such_key=1"], "seed, epochs"),
     (["+grid=smoke", "seeds=0"], "seeds must be >= 1, got 0"),
 ])
 def test_bad_input_names_the_choices_and_exits_nonzero(tmp_path, args, expected):
@@ -73,6 +73,41 @@ def test_bad_input_names_the_choices_and_exits_nonzero(tmp_path, args, expected)
     assert result.returncode != 0
     assert expected in result.stderr + result.stdout
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("n_jobs", ["0", "-1"])
+def test_no_runs_at_once_is_one_line_saying_what_to_do_and_exit_2(tmp_path, n_jobs):
+    result = sweep("+grid=smoke", f"hydra.launcher.n_jobs={n_jobs}", f"results_dir={tmp_path}", check=False)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip() == (f"hersd-sweep: error: hydra.launcher.n_jobs={n_jobs}: give the number of runs "
+                                     f"to train at once, 1 or more, or leave it out for one per core "
+                                     f"({available_cores()} here)")
+    assert not any(tmp_path.iterdir())
+
+
+def test_help_names_the_command_and_only_the_groups_a_sweep_takes():
+    text = sweep("--help").stdout
+    assert text.startswith("usage: hersd-sweep ") and "Hydra" not in text
+    groups = [line.split("=")[0].strip() for line in text.split("config groups:\n")[1].split("\n\n")[0].splitlines()]
+    assert groups == ["+grid", "task", "algo", "schedule", "learner", "hydra/launcher"]
+    for group in groups:  # each works: its first option composes into a dry run
+        option = text.split(f"{group}=")[1].split("|")[0].split()[0]
+        assert option
+
+
+def test_the_local_launcher_runs_one_per_core_in_the_listed_order(tmp_path):
+    from hersd.compose import compose
+    from sweeps.launch import register_schemas
+
+    register_schemas()
+    launcher = compose("sweep", ["+grid=smoke"], job_name="test", with_hydra=True).hydra.launcher
+    assert (launcher.n_jobs, int(launcher.batch_size)) == (available_cores(), 1)  # a free worker takes the next
+    args = ["+grid=smoke", "epochs=1", *TINY, "hydra.launcher.n_jobs=1", f"results_dir={tmp_path}"]
+    order = listed_runs(sweep(*args, "--dry-run").stdout)
+    sweep(*args)
+    finished = [json.loads(line)["run_dir"] for p in tmp_path.glob(".sweeps/*/progress.jsonl")
+                for line in p.read_text().splitlines()]
+    assert finished == order  # seed by seed: (HER, linear) seed 0, then seed 1
 
 
 def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):

@@ -1,0 +1,96 @@
+"""scripts/land.py: a campaign folder's logs and animations landed in a git repository's results/,
+atomically, never a complete log replaced by an unfinished one, each complete run committed alone."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+
+from analysis.synthetic import write_animation, write_run
+from hersd.config import TrainConfig
+from hersd.runlog import read_records
+
+LAND = [sys.executable, str(Path(__file__).resolve().parent.parent / "scripts" / "land.py")]
+DONE, RUNNING = Path("push/her/constant-0.8/seed5-aaaa0000"), Path("push/her/linear-b1_0.25/seed5-bbbb1111")
+
+
+def write_log(directory: Path, epochs_done: int, complete: bool = False) -> Path:
+    with mock.patch("os.fsync"):
+        return write_run(directory, TrainConfig(epochs=200), np.linspace(0, 1, epochs_done), complete=complete)
+
+
+def git(repo: Path, *args: str) -> str:
+    return subprocess.run(["git", *args], cwd=repo, capture_output=True, text=True, check=True).stdout
+
+
+@pytest.fixture
+def repo(tmp_path) -> Path:
+    """A git repository with one commit and a file staged by someone else."""
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    git(repo, "init", "--quiet")
+    git(repo, "config", "user.email", "test@example.com")
+    git(repo, "config", "user.name", "test")
+    (repo / "README").write_text("x")
+    git(repo, "add", "README")
+    git(repo, "commit", "--quiet", "-m", "start")
+    (repo / "other.txt").write_text("someone else's")
+    git(repo, "add", "other.txt")
+    return repo
+
+
+def land(campaign: Path, repo: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([*LAND, str(campaign), "--into", str(repo / "results"), *args], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_land_copies_logs_and_animations_and_commits_each_complete_run_alone(tmp_path, repo):
+    campaign = tmp_path / "campaign"
+    write_log(campaign / DONE, 200, complete=True)
+    write_animation(campaign / DONE, 200)
+    write_log(campaign / RUNNING, 30)
+    (campaign / RUNNING / "checkpoint.pt").write_bytes(b"never landed")
+    write_log(campaign / ".sweeps" / "x", 3)  # not a run of the folder
+    landed = land(campaign, repo, "--commit")
+    assert landed.returncode == 0, landed.stderr
+    results = repo / "results"
+    files = sorted(p.relative_to(results) for p in results.rglob("*") if p.is_file())
+    assert files == [DONE / "policy" / "epoch_200.gif", DONE / "run.mcap", RUNNING / "run.mcap"]
+    assert (results / DONE / "run.mcap").read_bytes() == (campaign / DONE / "run.mcap").read_bytes()
+    message = f"results: {DONE.as_posix()} complete (200 epochs)"
+    assert git(repo, "log", "--format=%s") == f"{message}\nstart\n"
+    assert git(repo, "show", "--name-only", "--format=", "HEAD").split() == \
+        [f"results/{DONE}/policy/epoch_200.gif", f"results/{DONE}/run.mcap"]
+    assert "A  other.txt" in git(repo, "status", "--porcelain")  # someone else's staged file: still staged
+    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 30" in landed.stdout
+
+    again = land(campaign, repo, "--commit")  # nothing new: nothing written, no commit
+    assert "unchanged" in again.stdout and "committed before" in again.stdout
+    assert len(git(repo, "log", "--format=%s").splitlines()) == 2
+
+
+def test_a_complete_log_is_never_replaced_by_an_unfinished_one_and_stale_animations_go(tmp_path, repo):
+    campaign, results = tmp_path / "campaign", repo / "results"
+    write_log(results / DONE, 200, complete=True)  # landed complete before (e.g. made on another machine)
+    write_log(campaign / DONE, 40)  # this folder's copy of the run, still training
+    write_log(results / RUNNING, 10)
+    write_animation(results / RUNNING, 50)  # an earlier attempt's, which restarted from scratch
+    write_log(campaign / RUNNING, 20)
+    write_animation(campaign / RUNNING, 10)
+    out = land(campaign, repo).stdout
+    assert f"kept      {results / DONE / 'run.mcap'}  complete (200 epochs) (the campaign's copy: epoch 40)" in out
+    assert read_records(results / DONE / "run.mcap").complete
+    assert len(read_records(results / RUNNING / "run.mcap").records) == 20
+    assert sorted(p.name for p in (results / RUNNING / "policy").iterdir()) == ["epoch_10.gif"]
+    assert not list(results.rglob(".*tmp")) and not list(results.rglob("*.snapshot"))
+    assert git(repo, "log", "--format=%s") == "start\n"  # no --commit: nothing committed
+
+
+def test_a_missing_campaign_folder_is_one_line_and_exit_2(tmp_path, repo):
+    result = land(tmp_path / "nowhere", repo)
+    assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "no folder" in result.stderr
