@@ -44,7 +44,7 @@ RewardFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 class Policy(Protocol):
-    """What the evaluation reads of a learner (:class:`hersd.learner.GoalConditionedLearner`)."""
+    """What the evaluation reads of a learner (:class:`hersd.learners.GoalConditionedLearner`)."""
 
     def act(self, obs: np.ndarray, goal: np.ndarray, explore: bool, rng: Any) -> np.ndarray: ...
 

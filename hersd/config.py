@@ -22,7 +22,7 @@ from hersd.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
-LEARNERS = ("ddpg", "td3", "sac")
+LEARNERS = ("ddpg", "td3", "sac")  # learner= values; each is a class in hersd/learners/ (docs/LEARNERS.md)
 
 # Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
 # The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
@@ -251,7 +251,7 @@ class SACConfig:
 class LearnerConfig:
     # The off-policy learner; all share ddpg.* (networks, optimiser, batch, gamma, polyak once
     # per cycle, normalisation, target clipping) and every other part of a run.
-    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac
+    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac: the learner class of that NAME (hersd/learners/)
     td3: TD3Config = field(default_factory=TD3Config)
     sac: SACConfig = field(default_factory=SACConfig)
 

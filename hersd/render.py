@@ -29,7 +29,7 @@ import torch
 from PIL import Image
 
 from hersd.config import ConfigError, TaskConfig, TrainConfig, to_train_config
-from hersd.learner import GoalConditionedLearner
+from hersd.learners import GoalConditionedLearner
 from hersd.envs import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run

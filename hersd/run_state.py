@@ -16,10 +16,9 @@ import numpy as np
 import torch
 
 from hersd.config import ConfigError, TrainConfig
-from hersd.ddpg import DDPG
-from hersd.learner import GoalConditionedLearner
 from hersd.envs import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.goal_envs import vectorised_reward
+from hersd.learners import GoalConditionedLearner, learner_class
 from hersd.mep import EpisodePrioritizer
 from hersd.replay import EpisodeBuffer
 from hersd.resources import available_memory_bytes
@@ -66,8 +65,9 @@ class RunState:
         """Totals that make runs comparable whatever the worker layout (logged with the run)."""
         cfg, d, horizon = self.cfg, self.cfg.ddpg, self.spec.horizon
         steps_per_cycle = d.rollouts_per_cycle * horizon
-        # q_target_range: the clip of target Q (an infinite bound, logged as null, is none); SAC clips nothing
-        q_target_range = None if cfg.learner.name == "sac" else list(self.q_range)
+        # q_target_range: the clip of target Q (an infinite bound, logged as null, is none); null: none at all
+        target_range = self.agent.target_range
+        q_target_range = None if target_range is None else list(target_range)
         return {"horizon": horizon, "gamma": self.gamma, "q_target_range": q_target_range,
                 "distance_threshold": self.spec.distance_threshold, "batch_size": d.batch_size,
                 "env_steps_per_epoch": cfg.task.cycles_per_epoch * steps_per_cycle,
@@ -126,19 +126,9 @@ def discounting(cfg: TrainConfig, spec: EnvSpec) -> tuple[float, tuple[float, fl
 
 def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_range: tuple[float, float],
                device: torch.device) -> GoalConditionedLearner:
-    """The learner of ``cfg.learner.name``: a :class:`GoalConditionedLearner` (act, update, update_targets, ...).
-    DDPG and TD3 clip target Q to ``q_range``; SAC's soft target is not clipped (hersd/sac.py)."""
-    q_low, q_high = q_range
-    sizes = (spec.obs_dim, spec.goal_dim, spec.action_dim, spec.max_action, gamma, q_low, device)
-    if cfg.learner.name == "td3":
-        from hersd.td3 import TD3
-
-        return TD3(cfg.ddpg, cfg.learner.td3, *sizes, q_max=q_high)
-    if cfg.learner.name == "sac":
-        from hersd.sac import SAC
-
-        return SAC(cfg.ddpg, cfg.learner.sac, *sizes)
-    return DDPG(cfg.ddpg, *sizes, q_max=q_high)
+    """The learner of ``cfg.learner.name``: a :class:`GoalConditionedLearner` (act, update, update_targets, ...),
+    built by its class (hersd/learners/), which decides whether its target is clipped to ``q_range``."""
+    return learner_class(cfg.learner.name).build(cfg, spec, gamma, q_range, device)
 
 
 def env_bytes(env: Any) -> int:
@@ -149,21 +139,15 @@ def env_bytes(env: Any) -> int:
 
 def memory_parts(cfg: TrainConfig, spec: EnvSpec, one_env_bytes: int) -> dict[str, int]:
     """Bytes a run allocates, by the part that allocates them (the names the memory check reports)."""
-    d, horizon = cfg.ddpg, spec.horizon
-    in_dim, units = spec.obs_dim + spec.goal_dim, d.hidden_units
+    d, horizon, learner = cfg.ddpg, spec.horizon, learner_class(cfg.learner.name)
     episode_floats = (horizon + 1) * (spec.obs_dim + spec.goal_dim) + horizon * (spec.goal_dim + spec.action_dim)
     episodes = max(1, d.buffer_size // horizon)
-    hidden = (d.hidden_layers - 1) * (units * units + units)
-    outputs = spec.action_dim * (2 if cfg.learner.name == "sac" else 1)  # SAC: a mean and a log std per action
-    actor = in_dim * units + units + hidden + units * outputs + outputs
-    critic = (in_dim + spec.action_dim) * units + units + hidden + units + 1
-    critics = 1 if cfg.learner.name == "ddpg" else 2  # TD3 and SAC: twin critics
     # One update: the sampled rows on the host and the device (copies, clips, concatenations), and each
-    # network pass's saved activations and their gradients (at most 8 passes: SAC's actor twice, four
-    # critic passes, two target critics).
-    row_bytes = 16 * (spec.obs_dim + spec.goal_dim + spec.action_dim + 2) + 24 + 2 * 8 * 4 * d.hidden_layers * units
+    # network pass's saved float32 activations and their gradients (the learner's UPDATE_PASSES).
+    activations = 2 * learner.UPDATE_PASSES * 4 * d.hidden_layers * d.hidden_units
+    row_bytes = 16 * (spec.obs_dim + spec.goal_dim + spec.action_dim + 2) + 24 + activations
     parts = {"replay buffer": episodes * episode_floats * 4,
-             "networks": (actor + critics * critic) * 4 * 5,  # online, target, gradient, two Adam moments
+             "networks": learner.network_bytes(d, spec),  # online, gradient, two Adam moments; targets
              "minibatch": d.batch_size * row_bytes,
              "envs": 2 * d.rollouts_per_cycle * one_env_bytes}
     if cfg.algo.mep.enabled:

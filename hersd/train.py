@@ -26,7 +26,7 @@ import hersd
 from hersd.bias import GOAL_TYPES, BiasEvaluator
 from hersd.config import TrainConfig
 from hersd.denormals import denormals_flushed
-from hersd.learner import GoalConditionedLearner, UpdateStats
+from hersd.learners import GoalConditionedLearner, UpdateStats, learner_class
 from hersd.envs import step_success
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
 from hersd.render import RenderError, render_policy, renders_at
@@ -48,10 +48,9 @@ class NonFiniteLossError(RuntimeError):
     """An epoch's losses or Q values are NaN or infinite; its record is not logged (one-line message)."""
 
 
-# The settings that scale an update's losses, named when they turn non-finite (SAC has no action_l2 term).
+# The settings that scale every learner's losses, named when they turn non-finite, with the learner's own
+# (its class's LOSS_SETTINGS: DDPG's and TD3's action_l2, SAC's temperature settings).
 LOSS_SETTINGS = "algo.lambda_r, algo.lambda_h, ddpg.gamma, ddpg.actor_lr, ddpg.critic_lr"
-LEARNER_LOSS_SETTINGS = {"ddpg": "ddpg.action_l2", "td3": "ddpg.action_l2",
-                         "sac": "learner.sac.init_alpha, learner.sac.alpha_lr, learner.sac.target_entropy"}
 
 
 def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
@@ -61,7 +60,7 @@ def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
     if bad:
         raise NonFiniteLossError(
             f"epoch {record['epoch']}: {', '.join(bad)}; the run stops at its last logged epoch and checkpoint; "
-            f"lower {LOSS_SETTINGS}, {LEARNER_LOSS_SETTINGS[cfg.learner.name]}")
+            f"lower {LOSS_SETTINGS}, {learner_class(cfg.learner.name).LOSS_SETTINGS}")
 
 
 # --------------------------------------------------------------------------- the steps of an epoch

@@ -7,32 +7,12 @@ import copy
 import numpy as np
 import pytest
 import torch
-
-from hersd.config import DDPGConfig, TD3Config
-from hersd.ddpg import DDPG
-from hersd.replay import TransitionBatch
-from hersd.td3 import TD3
-
-OBS, GOAL, ACTION, BATCH = 5, 3, 2, 16
+from conftest import BATCH, batch, tiny_learner
 
 
-def tiny_agent(**changes) -> DDPG:
-    torch.manual_seed(0)
-    cfg = DDPGConfig(hidden_layers=2, hidden_units=16, **changes)
-    agent = DDPG(cfg, OBS, GOAL, ACTION, max_action=1.0, gamma=0.98, q_min=-50.0)
-    rng = np.random.default_rng(0)
-    agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
-    return agent
-
-
-def batch(reward: float = -1.0, seed: int = 1) -> TransitionBatch:
-    rng = np.random.default_rng(seed)
-    f32 = np.float32
-    return TransitionBatch(obs=rng.normal(size=(BATCH, OBS)).astype(f32), next_obs=rng.normal(size=(BATCH, OBS)).astype(f32),
-                           goal=rng.normal(size=(BATCH, GOAL)).astype(f32),
-                           action=rng.uniform(-1, 1, size=(BATCH, ACTION)).astype(f32),
-                           reward=np.full(BATCH, reward, f32), relabelled=np.zeros(BATCH, bool),
-                           real_success=np.zeros(BATCH, bool), episode=np.zeros(BATCH, int), t=np.zeros(BATCH, int))
+def tiny_agent(**changes):
+    """A tiny DDPG with these ``ddpg.*`` changes."""
+    return tiny_learner("ddpg", ddpg=changes)
 
 
 @pytest.mark.parametrize("reward, bound", [(1e6, 0.0), (-1e6, -50.0)])
@@ -50,9 +30,7 @@ def test_target_q_is_clipped_to_its_range(reward, bound):
 @pytest.mark.parametrize("reward, bound", [(1e6, 50.0), (-1e6, 0.0)])
 def test_target_q_of_rewards_0_or_1_is_clipped_to_0_and_q_max(learner, reward, bound):
     """The mazes' range (rewards 0 or 1): target Q in [0, 1 / (1 - gamma)] (hersd.run_state.discounting)."""
-    torch.manual_seed(0)
-    cfg, sizes = DDPGConfig(hidden_layers=2, hidden_units=16), (OBS, GOAL, ACTION, 1.0, 0.98, 0.0)
-    agent = DDPG(cfg, *sizes, q_max=50.0) if learner == "ddpg" else TD3(cfg, TD3Config(), *sizes, q_max=50.0)
+    agent = tiny_learner(learner, q_range=(0.0, 50.0))
     data = batch()
     target = agent.target_q(agent._inputs(data.next_obs, data.goal), torch.full((BATCH, 1), reward))
     assert torch.all(target == bound)

@@ -100,7 +100,7 @@ def test_the_target_clip_follows_the_envs_reward_range(overrides, rewards, clip)
     state = RunState(compose_train([*overrides, *ONE_CYCLE]))
     assert state.spec.reward_range == rewards
     np.testing.assert_allclose(state.q_range, clip, rtol=1e-12)
-    assert (state.agent.q_min, state.agent.q_max) == state.q_range
+    assert state.agent.target_range == state.q_range
     assert state.effective_totals()["q_target_range"] == list(state.q_range)
     state.close()
 

@@ -10,24 +10,15 @@ import math
 import numpy as np
 import pytest
 import torch
-from test_ddpg import ACTION, BATCH, GOAL, OBS, batch
+from conftest import ACTION, BATCH, batch, tiny_learner
 
-from hersd.config import ConfigError, DDPGConfig, SACConfig, TD3Config
-from hersd.ddpg import DDPG
-from hersd.sac import SAC
-from hersd.td3 import TD3
+from hersd.config import ConfigError, SACConfig, TD3Config
 
-SMALL = DDPGConfig(hidden_layers=2, hidden_units=16)
 LEARNERS = ["td3", "sac"]
 
 
 def make(learner: str, max_action: float = 1.0, seed: int = 0, **settings):
-    torch.manual_seed(seed)
-    cls, cfg = (TD3, TD3Config) if learner == "td3" else (SAC, SACConfig)
-    agent = cls(SMALL, cfg(**settings), OBS, GOAL, ACTION, max_action, 0.98, -50.0)
-    rng = np.random.default_rng(0)
-    agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
-    return agent
+    return tiny_learner(learner, max_action=max_action, seed=seed, **settings)
 
 
 def params(net: torch.nn.Module) -> list[torch.Tensor]:
@@ -106,20 +97,6 @@ def test_same_seed_gives_the_same_numbers_and_randomness_is_torchs(learner):
     assert stats == stats_again and same(weights, weights_again)
     other_stats, _ = run(2, 1)
     assert [s.critic_loss for s in other_stats] != [s.critic_loss for s in stats]
-
-
-def test_td3_acts_exactly_as_ddpg():
-    td3 = make("td3", max_action=2.0)
-    torch.manual_seed(0)
-    ddpg = DDPG(SMALL, OBS, GOAL, ACTION, 2.0, 0.98, -50.0)
-    ddpg.load_state_dict({k: v for k, v in td3.state_dict().items() if k in ("actor", "obs_norm", "goal_norm")})
-    data = batch()
-    for explore in (False, True):
-        a = td3.act(data.obs, data.goal, explore, np.random.default_rng(5))
-        b = ddpg.act(data.obs, data.goal, explore, np.random.default_rng(5))
-        assert a.dtype == np.float64 and a.shape == (BATCH, ACTION) and np.array_equal(a, b)
-    explored = td3.act(data.obs, data.goal, True, np.random.default_rng(5))
-    assert not np.array_equal(explored, td3.act(data.obs, data.goal, False, np.random.default_rng(5)))
 
 
 def test_sac_tests_with_tanh_of_the_mean_and_explores_with_the_given_generator_only():

@@ -1,4 +1,5 @@
-"""TD3 and SAC: their update rules on tiny networks, exact resume, and learning FetchReach."""
+"""The learners: what each class declares to the run (registry, networks, checkpoint keys, target range,
+loss settings), TD3's and SAC's update rules on tiny networks, exact resume, and learning FetchReach."""
 
 from __future__ import annotations
 
@@ -8,28 +9,86 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from conftest import TINY, metrics
-from test_ddpg import ACTION, BATCH, GOAL, OBS, batch
+from conftest import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
 from hersd.compose import compose_train
-from hersd.config import DDPGConfig, SACConfig, TD3Config
+from hersd.config import LEARNERS as CONFIG_LEARNERS
+from hersd.learners import LEARNERS
 from hersd.runlog import read_run
-from hersd.sac import SAC
-from hersd.td3 import TD3
 from hersd.train import train
-
-SMALL = DDPGConfig(hidden_layers=2, hidden_units=16)
 
 
 def make(learner: str, **settings):
-    torch.manual_seed(0)
-    if learner == "td3":
-        agent = TD3(SMALL, TD3Config(**settings), OBS, GOAL, ACTION, 1.0, 0.98, -50.0)
-    else:
-        agent = SAC(SMALL, SACConfig(**settings), OBS, GOAL, ACTION, 1.0, 0.98, -50.0)
-    rng = np.random.default_rng(0)
-    agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
-    return agent
+    return tiny_learner(learner, **settings)
+
+
+# The checkpoint's keys and Adam parameter groups (networks per group) of each learner, as hersd wrote them
+# before the learners became a package: runs in progress resume from such checkpoints, so they never change.
+CHECKPOINT_LAYOUT = {
+    "ddpg": ({"actor", "critic", "actor_target", "critic_target", "optimizer", "obs_norm", "goal_norm"}, [1, 1]),
+    "td3": ({"actor", "critic", "actor_target", "critic_target", "optimizer", "obs_norm", "goal_norm", "critic2",
+             "critic2_target", "counters"}, [1, 1, 1]),
+    "sac": ({"actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
+             "obs_norm", "goal_norm", "log_alpha"}, [1, 2]),
+}
+
+
+def test_every_configurable_learner_is_a_registered_class_that_builds_itself():
+    assert set(LEARNERS) == set(CONFIG_LEARNERS)
+    for name, cls in LEARNERS.items():
+        agent = tiny_learner(name)
+        assert type(agent) is cls and cls.NAME == name and cls.LOSS_SETTINGS
+
+
+@pytest.mark.parametrize("name", sorted(CHECKPOINT_LAYOUT))
+def test_checkpoint_keys_and_optimiser_groups_stay_those_of_existing_checkpoints(name):
+    keys, groups = CHECKPOINT_LAYOUT[name]
+    state = tiny_learner(name).state_dict()
+    assert set(state) == keys
+    tensors = 2 * (tiny_learner(name).cfg.hidden_layers + 1)  # a weight and a bias per layer
+    assert [len(group["params"]) for group in state["optimizer"]["param_groups"]] == [tensors * n for n in groups]
+
+
+@pytest.mark.parametrize("name, clipped", [("ddpg", True), ("td3", True), ("sac", False)])
+def test_the_learner_says_whether_its_target_is_clipped(name, clipped):
+    assert tiny_learner(name, q_range=(-7.0, 0.0)).target_range == ((-7.0, 0.0) if clipped else None)
+
+
+@pytest.mark.parametrize("name", sorted(CHECKPOINT_LAYOUT))
+def test_network_bytes_count_the_built_networks_targets_gradients_and_adam_moments(name):
+    agent = tiny_learner(name)
+    cls = type(agent)
+    online = sum(p.numel() for net in cls.networks(tiny_spec()) for p in getattr(agent, net).parameters())
+    targets = sum(p.numel() for net in cls.TARGETS for p in getattr(agent, f"{net}_target").parameters())
+    assert cls.network_bytes(agent.cfg, tiny_spec()) == 4 * (4 * online + targets)
+    assert set(cls.networks(tiny_spec())) | {f"{net}_target" for net in cls.TARGETS} <= set(cls.PARTS)
+
+
+def test_a_new_learner_is_one_class_the_run_asks(monkeypatch):
+    """A class with a NAME is found by make_agent, the memory check and the non-finite-loss message."""
+    from hersd import learners, run_state
+    from hersd.learners.ddpg import DDPG
+    from hersd.train import NonFiniteLossError, check_finite
+
+    monkeypatch.setattr(learners.base, "LEARNERS", dict(learners.base.LEARNERS))
+
+    class Quiet(DDPG):
+        NAME = "quiet"
+        LOSS_SETTINGS = "learner.quiet.volume"
+        UPDATE_PASSES = 1000
+
+    cfg = compose_train(["task=reach"])
+    cfg.learner.name = "quiet"
+    agent = run_state.make_agent(cfg, tiny_spec(), 0.98, (-50.0, 0.0), torch.device("cpu"))
+    assert type(agent) is Quiet
+    minibatch = [run_state.memory_parts(c, tiny_spec(), 0)["minibatch"] for c in (cfg, compose_train(["task=reach"]))]
+    assert minibatch[0] > minibatch[1]
+    record = {"epoch": 3, "critic_loss": float("nan"), "actor_loss": 0.0, "q_mean": 0.0, "q_std": 0.0, "alpha": None,
+              "policy_entropy": None}
+    with pytest.raises(NonFiniteLossError, match="learner.quiet.volume$"):
+        check_finite(cfg, record)
+    with pytest.raises(TypeError, match="two learners named 'quiet'"):
+        type("Loud", (DDPG,), {"NAME": "quiet"})
 
 
 def test_td3_target_takes_the_minimum_of_the_twin_critics_at_smoothed_target_actions():

@@ -308,7 +308,7 @@ def test_flush_denormal_treats_denormals_as_zero_in_the_updates_only(tmp_path, m
     acting (the env's physics and the rollouts keep IEEE arithmetic) nor after the run; without it, never."""
     import torch
 
-    from hersd.ddpg import DDPG
+    from hersd.learners.ddpg import DDPG
 
     denormal = torch.tensor([1e-40])  # below float32's smallest normal, 1.18e-38
     assert denormal.item() != 0.0

@@ -1,11 +1,12 @@
 """SAC with automatic temperature (Haarnoja et al. 2018, "Soft Actor-Critic Algorithms and
-Applications") on the DDPG core's inputs, networks and settings.
+Applications") on the DDPG core's inputs, networks and settings: ``learner=sac``.
 
 - policy: an MLP of DDPG's size giving the mean and log std (clamped to [-20, 2], as in the
   authors' code) of a Gaussian over pre-tanh actions; a = tanh(u), and
   log pi(a|s) = log N(u) - sum log(1 - tanh(u)^2 + 1e-6);
-- twin critics; soft target r + gamma * (min(Q1', Q2')(s', a') - alpha * log pi(a'|s')),
-  a' ~ pi(s'), not clipped (see ``SAC.target_q``);
+- twin critics (their loss and the minimum of their targets are every learner's,
+  :class:`hersd.learners.base.GoalConditionedLearner`); soft target
+  r + gamma * (min(Q1', Q2')(s', a') - alpha * log pi(a'|s')), a' ~ pi(s'), not clipped (``SAC.target_q``);
 - actor loss mean(alpha * log pi(a|s) - min(Q1, Q2)(s, a)), a ~ pi(s) (no action_l2 term:
   the entropy term is SAC's regulariser);
 - temperature: log alpha (starting at log init_alpha) steps with Adam (alpha_lr) on
@@ -18,15 +19,18 @@ as in the DDPG core; there is no actor target. Sampling inside updates uses torc
 
 from __future__ import annotations
 
-import copy
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from hersd.config import DDPGConfig, SACConfig
-from hersd.learner import GoalConditionedLearner, UpdateStats, frozen_q, mlp
+from hersd.config import DDPGConfig, SACConfig, TrainConfig
+from hersd.learners.base import TWIN_CRITICS, GoalConditionedLearner, UpdateStats, frozen_q
 from hersd.replay import TransitionBatch
+
+if TYPE_CHECKING:
+    from hersd.envs import EnvSpec
 
 LOG_STD_RANGE = (-20.0, 2.0)
 
@@ -34,26 +38,35 @@ LOG_STD_RANGE = (-20.0, 2.0)
 class SAC(GoalConditionedLearner):
     """A squashed-Gaussian actor, twin critics and a learnt temperature, on the shared input normalisers."""
 
+    NAME = "sac"
+    CRITICS = TWIN_CRITICS
+    TARGETS = CRITICS  # no actor target
     PARTS = ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
-             "obs_norm", "goal_norm")
+             "obs_norm", "goal_norm")  # + "log_alpha", below
+    LOSS_SETTINGS = "learner.sac.init_alpha, learner.sac.alpha_lr, learner.sac.target_entropy"
+    UPDATE_PASSES = 8  # the actor on s' and s, both critics on (s, a), both frozen on (s, a~), both targets
+    target_range = None  # the soft target is not clipped (target_q)
 
-    def __init__(self, cfg: DDPGConfig, sac: SACConfig, obs_dim: int, goal_dim: int, action_dim: int,
-                 max_action: float, gamma: float, q_min: float, device: torch.device = torch.device("cpu")):
-        # q_min is taken for the learners' common signature; SAC's soft target is not clipped.
-        super().__init__(cfg, obs_dim, goal_dim, max_action, gamma, device)
-        self.action_dim = action_dim
-        in_dim = obs_dim + goal_dim
-        self.actor = mlp(in_dim, 2 * action_dim, cfg.hidden_layers, cfg.hidden_units).to(device)
-        self.critic = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
-        self.critic2 = mlp(in_dim + action_dim, 1, cfg.hidden_layers, cfg.hidden_units).to(device)
-        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
-        self.critic2_target = copy.deepcopy(self.critic2).requires_grad_(False)
+    @classmethod
+    def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
+              device: torch.device) -> "SAC":
+        return cls(cfg.ddpg, cfg.learner.sac, spec, gamma, device)  # q_range: not SAC's bound (target_q)
+
+    @classmethod
+    def networks(cls, spec: "EnvSpec") -> dict[str, tuple[int, int]]:
+        """The shared layout, with an actor that gives a mean and a log std per action."""
+        in_dim = spec.obs_dim + spec.goal_dim
+        return {**super().networks(spec), "actor": (in_dim, 2 * spec.action_dim)}
+
+    def __init__(self, cfg: DDPGConfig, sac: SACConfig, spec: "EnvSpec", gamma: float,
+                 device: torch.device = torch.device("cpu")):
+        super().__init__(cfg, spec, gamma, device)
         self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
                                            {"params": [*self.critic.parameters(), *self.critic2.parameters()],
                                             "lr": cfg.critic_lr}], fused=True)
         self.log_alpha = torch.tensor([math.log(sac.init_alpha)], device=device, requires_grad=True)
         self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=sac.alpha_lr)
-        self.target_entropy = -float(action_dim) if sac.target_entropy is None else sac.target_entropy
+        self.target_entropy = -float(spec.action_dim) if sac.target_entropy is None else sac.target_entropy
 
     def policy(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised inputs (B, in_dim) -> mean and std (B, action_dim) of the pre-tanh Gaussian."""
@@ -100,8 +113,7 @@ class SAC(GoalConditionedLearner):
         the SAC authors' code (softlearning) and stable-baselines3, the soft target is not clipped.
         """
         next_action, next_log_prob = self.sample(next_inputs)
-        target_inputs = torch.cat([next_inputs, next_action], dim=1)
-        next_q = torch.minimum(self.critic_target(target_inputs), self.critic2_target(target_inputs))
+        next_q = self.min_target_q(torch.cat([next_inputs, next_action], dim=1))
         return reward + self.gamma * (next_q - self.log_alpha.exp() * next_log_prob)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
@@ -109,9 +121,7 @@ class SAC(GoalConditionedLearner):
         inputs = self._inputs(batch.obs, batch.goal)
         action = self.tensor(batch.action) / self.max_action
         target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
-        critic_inputs = torch.cat([inputs, action], dim=1)
-        q = self.critic(critic_inputs)
-        critic_loss = torch.mean(torch.square(target_q - q)) + torch.mean(torch.square(target_q - self.critic2(critic_inputs)))
+        critic_loss, q = self.critic_loss(torch.cat([inputs, action], dim=1), target_q)
         policy_action, log_prob = self.sample(inputs)
         policy_inputs = torch.cat([inputs, policy_action], dim=1)
         policy_q = torch.minimum(frozen_q(self.critic, policy_inputs), frozen_q(self.critic2, policy_inputs))
@@ -126,10 +136,6 @@ class SAC(GoalConditionedLearner):
         self.alpha_optimizer.step()
         q = q.detach()
         return UpdateStats.of(critic_loss.item(), actor_loss.item(), q, batch, entropy=-log_prob.detach().mean().item())
-
-    def update_targets(self) -> None:
-        """Polyak-move both critics' targets (SAC has no actor target)."""
-        self.polyak((self.critic, self.critic_target), (self.critic2, self.critic2_target))
 
     def state_dict(self) -> dict:
         return {**super().state_dict(), "log_alpha": self.log_alpha.detach().clone()}

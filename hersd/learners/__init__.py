@@ -1,0 +1,16 @@
+"""The learners (docs/LEARNERS.md): one module per learner, each a class that declares what the run
+asks of it (:mod:`hersd.learners.base`). Importing this package imports every module in it, so every
+learner class is registered under its ``NAME``: :func:`learner_class` finds it by ``learner=``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+from hersd.learners.base import LEARNERS, GoalConditionedLearner, UpdateStats, learner_class
+
+__all__ = ["LEARNERS", "GoalConditionedLearner", "UpdateStats", "learner_class"]
+
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f"{__name__}.{_module.name}")
