@@ -36,7 +36,8 @@ from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_a
                                  place_after_curves)
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
-from hersd.study import StudyStorage, StudyStorageError, find_study_storages, open_study_storage
+from analysis.studies import StudyStorage, open_study_storage
+from hersd.study import StudyStorageError, find_study_storages
 from analysis.tables import html_table, markdown_table
 from analysis.workers import ForkedMap
 from hersd.tasks import task_title

@@ -11,7 +11,7 @@
 
 What a study holds (trial parameters, user attributes) is defined by :mod:`hersd.study`.
 :func:`study_figures` draws these for every study in a storage (or one), opened read-only
-by :func:`hersd.study.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR
+by :func:`analysis.studies.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR
 [--study NAME]`` does the same from the command line (``hersd-report`` draws them for every
 study it finds). Needs optuna, pandas and matplotlib, not torch or MuJoCo.
 """
@@ -38,8 +38,9 @@ from optuna.trial import TrialState  # noqa: E402
 
 from analysis.tables import markdown_table  # noqa: E402
 from hersd.schedules import MU_EPS_BAND, effective_beta2, mean_rate_approx  # noqa: E402
+from analysis.studies import open_study_storage  # noqa: E402
 from hersd.study import (KIND_PARAMS, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
-                         StudyStorageError, mean_rates, open_study_storage, trial_params)
+                         StudyStorageError, mean_rates, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
@@ -189,7 +190,7 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     (or only ``study_name``) into ``out_dir``; -> the files written.
 
     ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a journal file, ``journal:<path>``
-    or a SQLAlchemy URL, opened read-only (:func:`hersd.study.open_study_storage`, which raises
+    or a SQLAlchemy URL, opened read-only (:func:`analysis.studies.open_study_storage`, which raises
     :class:`hersd.study.StudyStorageError` for one it cannot read).
     """
     opened = open_study_storage(storage_url_or_db_path)

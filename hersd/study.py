@@ -3,28 +3,25 @@
 
 - Where a study lives. A storage spec is ``journal:<file>``, a SQLAlchemy URL
   (``sqlite:///<file>``, ``postgresql://...``, ``mysql+pymysql://...``) or a plain path:
-  ``*.log`` / ``*.journal`` a journal, anything else a SQLite file. :func:`open_storage` opens
-  one for writing (the search), :func:`open_study_storage` read-only (the report); every
-  failure is a :class:`StudyStorageError` with one line, passwords hidden.
+  ``*.log`` / ``*.journal`` a journal, anything else a SQLite file. Its users open it:
+  ``sweeps.search.storage`` for writing (the search), ``analysis.studies`` read-only (the
+  report); every failure is a :class:`StudyStorageError` with one line, passwords hidden.
 - What a trial is: its parameters (:data:`KIND_PARAMS`), how Optuna stores them
   (:func:`stored_params`, :func:`trial_params`), and the schedule and run config they stand
   for (:func:`schedule_config`, :func:`trial_config`).
 - What the search writes into the study and its trials for the report to read: the user
   attributes below and :class:`StudySettings`.
 
-Light: Optuna and SQLAlchemy are imported only inside the functions that open storages.
+Light: imports neither Optuna nor SQLAlchemy (tests/test_layers.py), so both layers above share it.
 """
 
 from __future__ import annotations
 
-import fcntl
-import functools
 import importlib.util
-import json
 import shlex
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from hersd.config import ConfigError, ScheduleConfig, TrainConfig
 from hersd.schedules import FIXED_KINDS, schedule_mean_rates
@@ -35,7 +32,6 @@ SQLITE_PREFIX = "sqlite:///"
 SQLITE_SUFFIXES = (".db", ".sqlite", ".sqlite3")
 STORAGE_SUFFIXES = SQLITE_SUFFIXES + JOURNAL_SUFFIXES  # the files in <folder>/search/ the report reads by itself
 SEARCH_FOLDER = "search"  # <results_dir>/search/: default storages (<study>.db), found by the report
-SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing
 CONNECT_TIMEOUT_SECONDS = 10  # how long to wait for a PostgreSQL server
 # backend -> how to get its driver (the extra's psycopg2 serves a bare postgresql:// when psycopg is missing)
 DRIVER_HINTS = {"postgresql": 'pip install "hersd[cluster]" (psycopg2, which postgresql:// and '
@@ -87,15 +83,13 @@ def storage_file(spec: str) -> Path | None:
 
 
 def shown(url: str) -> str:
-    """A storage spec for messages: a URL's password hidden."""
-    if "://" not in url:
+    """A storage spec for messages: a URL's password hidden (``postgresql://user:***@host/db``)."""
+    scheme, separator, rest = url.partition("://")
+    credentials, at, host = rest.rpartition("@")
+    if not separator or not at:
         return url
-    from sqlalchemy import make_url
-
-    try:
-        return make_url(url).render_as_string(hide_password=True)
-    except Exception:  # noqa: BLE001 - not a URL: show what follows the credentials
-        return url.split("@")[-1]
+    user, colon, _password = credentials.partition(":")
+    return f"{scheme}://{user}{':***' if colon else ''}@{host}"
 
 
 def storage_name(spec: str) -> str:
@@ -128,7 +122,7 @@ def report_command(results_dir: str | Path, spec: str) -> str:
     return shlex.join(command)
 
 
-# --------------------------------------------------------------------------- databases (both ways)
+# --------------------------------------------------------------------------- databases (both ways: SQLAlchemy URL objects given)
 
 def _installed(module: str) -> bool:
     """Whether ``module`` can be imported (without importing it)."""
@@ -138,7 +132,7 @@ def _installed(module: str) -> bool:
         return False
 
 
-def _with_driver(url: Any) -> Any:
+def with_driver(url: Any) -> Any:
     """A bare ``postgresql://`` sqlalchemy URL with the psycopg driver that is installed: psycopg2 when it
     is and psycopg (SQLAlchemy's default) is not."""
     if url.get_backend_name() != "postgresql" or "+" in url.drivername:
@@ -147,7 +141,7 @@ def _with_driver(url: Any) -> Any:
     return url.set(drivername="postgresql+psycopg2" if installed == {"psycopg2"} else "postgresql+psycopg")
 
 
-def _connect_args(url: Any, read_only: bool) -> dict[str, Any]:
+def connect_args(url: Any, read_only: bool) -> dict[str, Any]:
     """libpq's settings for PostgreSQL through psycopg: a connect timeout, and read-only transactions if asked."""
     if url.get_backend_name() != "postgresql" or url.get_driver_name() not in ("psycopg2", "psycopg"):
         return {}
@@ -155,239 +149,6 @@ def _connect_args(url: Any, read_only: bool) -> dict[str, Any]:
     if read_only:
         args["options"] = "-c default_transaction_read_only=on"
     return args
-
-
-# --------------------------------------------------------------------------- opening for writing (the search)
-
-def _writable_url(location: str) -> Any:
-    """A SQLAlchemy URL string -> a checked ``sqlalchemy.URL`` (absolute SQLite path, installed PostgreSQL driver)."""
-    # StudyStorageError for a malformed URL, in-memory SQLite, an unknown scheme or a missing driver,
-    # all found by creating an engine, which imports the driver but does not connect.
-    import sqlalchemy
-    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
-
-    try:
-        url = sqlalchemy.make_url(location)
-    except (ArgumentError, ValueError) as err:
-        raise StudyStorageError(f"search.storage={shown(location)}: not a storage URL ({one_line(err)}); "
-                                f"{SCHEMES}") from None
-    backend = url.get_backend_name()
-    if backend == "sqlite":
-        if url.database in (None, "", ":memory:"):
-            raise StudyStorageError("search.storage: an in-memory SQLite database can be neither shared by workers "
-                                    "nor resumed; name a file: sqlite:///<file>")
-        url = url.set(database=str(Path(url.database).expanduser().resolve()))
-    url = _with_driver(url)
-    try:
-        sqlalchemy.create_engine(url).dispose()
-    except NoSuchModuleError:
-        raise StudyStorageError(f"search.storage={shown(location)}: unknown database scheme {url.drivername!r}; "
-                                f"{SCHEMES}") from None
-    except ImportError as err:
-        hint = DRIVER_HINTS.get(backend, "install it, or name an installed driver (<database>+<driver>://...)")
-        raise StudyStorageError(f"search.storage={shown(location)}: the database driver "
-                                f"{err.name or one_line(err)} is not installed; {hint}") from None
-    return url
-
-
-def resolve_storage(spec: str) -> str:
-    """Check a storage spec without connecting -> the spec workers open (``journal:<absolute path>`` or a URL)."""
-    kind, location = storage_location(spec)
-    if kind == "journal":
-        return f"{JOURNAL_PREFIX}{storage_file(spec)}"
-    return _writable_url(location).render_as_string(hide_password=False)
-
-
-@functools.cache
-def _sqlite_storage_class() -> type:
-    """The class of :func:`open_storage`'s SQLite storages, made once Optuna is imported."""
-    from optuna.storages import RDBStorage
-    from optuna.trial import TrialState
-
-    class SQLiteStorage(RDBStorage):
-        """RDBStorage on a local SQLite file, with queue claims serialised by a file lock.
-
-        Optuna pops an enqueued trial by reading it as WAITING and then setting it RUNNING; SQLite
-        (through Python's sqlite3) reads outside the write transaction, so two workers popping at
-        the same moment can both claim one trial, and both train it. Holding ``<db>.lock`` around
-        the WAITING -> RUNNING step makes the second claimant see RUNNING and move on.
-        """
-
-        def __init__(self, path: Path) -> None:
-            """Open (creating) the SQLite file at ``path``; its claim lock is ``<path>.lock``."""
-            super().__init__(f"{SQLITE_PREFIX}{path}",
-                             engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
-            self.claim_lock_path = path.with_name(path.name + ".lock")
-
-        def set_trial_state_values(self, trial_id: int, state: TrialState, values=None) -> bool:
-            """Optuna's state change; the change to RUNNING (a claim) under the file lock."""
-            if state != TrialState.RUNNING:
-                return super().set_trial_state_values(trial_id, state, values)
-            with open(self.claim_lock_path, "a") as lock_file:
-                fcntl.flock(lock_file, fcntl.LOCK_EX)
-                return super().set_trial_state_values(trial_id, state, values)
-
-    return SQLiteStorage
-
-
-def open_storage(spec: str) -> Any:
-    """Open (creating a missing file or Optuna's tables) the storage ``spec`` names for writing
-    -> an ``optuna.storages.BaseStorage``; StudyStorageError if it cannot."""
-    from optuna.storages import JournalStorage
-    from sqlalchemy.exc import SQLAlchemyError
-
-    kind, location = storage_location(spec)
-    path, where = storage_file(spec), storage_name(spec)
-    try:
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        if kind == "journal":
-            from optuna.storages.journal import JournalFileBackend
-
-            return JournalStorage(JournalFileBackend(str(path)))
-        return _sqlite_storage_class()(path) if path is not None else _open_database(location)
-    except OSError as err:
-        raise StudyStorageError(f"search.storage: cannot open {where} ({err.strerror or one_line(err)})") from None
-    except SQLAlchemyError as err:
-        reason = one_line(getattr(err, "orig", None) or err)
-        raise StudyStorageError(f"search.storage: cannot reach the database at {where} ({reason})") from None
-    except (RuntimeError, ValueError, KeyError) as err:  # another Optuna schema version; a damaged journal
-        raise StudyStorageError(f"search.storage: cannot use {where} as an Optuna storage ({one_line(err)})") from None
-
-
-def _open_database(location: str) -> Any:
-    """An RDBStorage at a SQLAlchemy URL (connections checked before use; PostgreSQL: a connect timeout).
-
-    Two processes creating Optuna's tables at once make one fail; it opens the tables the other made."""
-    from optuna.storages import RDBStorage
-    from sqlalchemy.exc import IntegrityError, ProgrammingError
-
-    url = _writable_url(location)
-    options: dict[str, Any] = {"pool_pre_ping": True}
-    if connect_args := _connect_args(url, read_only=False):
-        options["connect_args"] = connect_args
-    try:
-        return RDBStorage(url.render_as_string(hide_password=False), engine_kwargs=options)
-    except (IntegrityError, ProgrammingError):  # another worker created Optuna's tables at the same moment
-        return RDBStorage(url.render_as_string(hide_password=False), engine_kwargs=options)
-
-
-# --------------------------------------------------------------------------- opening read-only (the report)
-
-@dataclass
-class StudyStorage:
-    """A storage opened read-only: ``shown`` names it in messages (no password), ``study_names`` sorted."""
-
-    shown: str
-    storage: Any  # optuna.storages.BaseStorage
-    study_names: list[str]
-
-
-def open_study_storage(spec: str | Path) -> StudyStorage:
-    """Open the storage ``spec`` names to read its studies, creating and changing nothing.
-
-    SQLite is opened in SQLite's read-only mode, PostgreSQL (psycopg drivers) in read-only
-    transactions, journals by a backend that only reads; a database without Optuna's tables is
-    refused before Optuna could create them. Raises :class:`StudyStorageError` for an unknown
-    URL scheme, a missing driver, an unreachable database, a missing or unreadable file, or a
-    storage holding no study.
-    """
-    spec = str(spec)
-    kind, location = storage_location(spec)
-    path, name = storage_file(spec), storage_name(spec)
-    if path is not None and not path.is_file():
-        raise StudyStorageError(f"{name}: no such study storage")
-    opened = _read_journal(path) if kind == "journal" else _read_database(location, name)
-    if not opened.study_names:
-        raise StudyStorageError(f"{opened.shown}: no Optuna study in this storage")
-    return opened
-
-
-class ReadOnlyJournal:
-    """An Optuna journal backend that reads a journal file and refuses to write.
-
-    Optuna's own file backend opens the file for appending (creating it when missing); this one
-    only reads. A last line without its newline is a write in progress and is not read yet.
-    """
-
-    def __init__(self, path: Path) -> None:
-        """A backend reading the journal at ``path``."""
-        self.path = path
-
-    def read_logs(self, log_number_from: int) -> Iterator[dict[str, Any]]:
-        """The journal's records from number ``log_number_from`` on."""
-        lines = self.path.read_bytes().split(b"\n")[:-1]  # the part after the last newline is incomplete
-        for line in lines[log_number_from:]:
-            yield json.loads(line)
-
-    def append_logs(self, logs: list[dict[str, Any]]) -> None:
-        """Refuse: the journal is opened read-only."""
-        raise StudyStorageError(f"{self.path}: opened read-only")
-
-
-def _read_journal(path: Path) -> StudyStorage:
-    """The studies of the journal file at ``path``."""
-    import optuna
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import BaseJournalBackend
-
-    BaseJournalBackend.register(ReadOnlyJournal)  # the journal interface, without inheriting a writer
-    try:
-        storage = JournalStorage(ReadOnlyJournal(path))
-        names = sorted(optuna.get_all_study_names(storage))
-    except (OSError, ValueError, KeyError, TypeError) as err:  # unreadable, not JSON, not Optuna's records
-        raise StudyStorageError(f"{path}: not a readable Optuna journal ({one_line(err)})") from None
-    return StudyStorage(shown=str(path), storage=storage, study_names=names)
-
-
-def _read_only_engine(location: str, name: str) -> tuple[Any, dict[str, Any]]:
-    """An engine on the database at URL ``location``, read-only where the driver allows -> (engine, its options)."""
-    import sqlalchemy
-    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
-
-    try:
-        url = _with_driver(sqlalchemy.make_url(location))
-    except (ArgumentError, ValueError) as err:
-        raise StudyStorageError(f"{name}: not a storage URL ({one_line(err)})") from None
-    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
-        path = Path(url.database.removeprefix("file:")).resolve()
-        url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
-    options = {"connect_args": args} if (args := _connect_args(url, read_only=True)) else {}
-    try:
-        return sqlalchemy.create_engine(url, **options), options
-    except (NoSuchModuleError, ArgumentError) as err:  # an unknown scheme or dialect
-        raise StudyStorageError(f"{name}: not a storage URL ({one_line(err)})") from None
-    except ImportError as err:
-        hint = DRIVER_HINTS.get(url.get_backend_name(), f"install the Python package {err.name}")
-        raise StudyStorageError(f"{name}: the database driver is missing ({err.name or one_line(err)}); "
-                                f"{hint}") from None
-
-
-def _read_database(location: str, name: str) -> StudyStorage:
-    """The studies of the database at URL ``location`` (``name`` names it in messages)."""
-    import optuna
-    import sqlalchemy
-    from optuna.storages import RDBStorage
-    from sqlalchemy.exc import SQLAlchemyError
-
-    engine, options = _read_only_engine(location, name)
-    try:
-        with engine.connect() as connection:
-            is_optuna = sqlalchemy.inspect(connection).has_table("studies")
-    except SQLAlchemyError as err:
-        raise StudyStorageError(f"cannot reach the database at {name} "
-                                f"({one_line(getattr(err, 'orig', None) or err)})") from None
-    finally:
-        engine.dispose()
-    if not is_optuna:
-        raise StudyStorageError(f"{name}: no Optuna study in this storage")
-    try:
-        storage = RDBStorage(engine.url.render_as_string(hide_password=False), engine_kwargs=options,
-                             skip_table_creation=True)
-        names = sorted(optuna.get_all_study_names(storage))
-    except (SQLAlchemyError, RuntimeError) as err:  # e.g. a schema of another Optuna version
-        raise StudyStorageError(f"{name}: cannot read its studies ({one_line(err)})") from None
-    return StudyStorage(shown=name, storage=storage, study_names=names)
 
 
 # --------------------------------------------------------------------------- trials

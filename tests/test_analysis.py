@@ -29,7 +29,8 @@ from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 from hersd.runlog import RunLogWriter, read_run
 from hersd.runstore import config_hash
-from hersd.study import StudyStorageError, open_study_storage
+from analysis.studies import open_study_storage
+from hersd.study import StudyStorageError
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
 WINDOW = 3

@@ -88,6 +88,19 @@ def test_no_import_circle():
             visit(module, [])
 
 
+def test_the_core_imports_neither_optuna_nor_sqlalchemy():
+    """hersd/ is one run: opening a study storage lives with its users (sweeps.search.storage for
+    writing, analysis.studies read-only); the trial encoding they share (hersd/study.py) needs neither."""
+    wrong = []
+    for path in (ROOT / "hersd").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
+            wrong += [f"{path.relative_to(ROOT)} imports {name}" for name in names
+                      if name.split(".")[0] in ("optuna", "sqlalchemy")]
+    assert not wrong, wrong
+
+
 def test_light_modules_import_without_torch_or_mujoco():
     light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.study",
              "hersd.config", "hersd.schedules", "hersd.tasks", "hersd.resources", "sweeps.launch"]

@@ -29,7 +29,8 @@ from hersd.compose import compose_train, group_options
 from hersd.resources import available_cores, resolve_threads
 from hersd.runlog import read_run
 from hersd.runstore import config_hash, run_dir
-from hersd.study import open_storage, param_overrides, trial_config
+from hersd.study import param_overrides, trial_config
+from sweeps.search.storage import open_storage
 from sweeps.search import cli, plan as search_plan, workers
 from sweeps.search.config import SlurmConfig, compose_search
 from sweeps.search.objective import TrialProgress

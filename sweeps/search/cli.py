@@ -17,7 +17,8 @@ import optuna
 from optuna.storages import BaseStorage
 
 from hersd.config import ConfigError
-from hersd.study import open_storage, report_command, shown, storage_file
+from hersd.study import report_command, shown, storage_file
+from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
 from sweeps.search.study import count_finished, open_study, requeue_lost_trials, trial_counts

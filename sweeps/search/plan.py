@@ -19,7 +19,8 @@ from hersd.compose import compose_train
 from hersd.config import ConfigError, ScheduleConfig, TrainConfig
 from hersd.resources import resolve_threads
 from hersd.runstore import check_writable, config_hash
-from hersd.study import KIND_PARAMS, SEARCH_FOLDER, StudySettings, default_storage, resolve_storage, trial_config
+from hersd.study import KIND_PARAMS, SEARCH_FOLDER, StudySettings, default_storage, trial_config
+from sweeps.search.storage import resolve_storage
 from sweeps.search.config import SearchConfig, enqueued_kind
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every

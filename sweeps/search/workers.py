@@ -22,7 +22,7 @@ import optuna
 
 from hersd.compose import CONFIG_MODULE
 from hersd.config import ConfigError
-from hersd.study import open_storage
+from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
 from sweeps.search.plan import SearchPlan, run_threads
