@@ -34,6 +34,7 @@ import pandas as pd
 
 from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
                                  place_after_curves)
+from analysis.critic import bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from analysis.studies import StudyStorage, open_study_storage
@@ -82,6 +83,12 @@ TABLE_NOTES = {
               "epochs to a threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
               "two sides' seeds (5 against 5: 252, so the smallest p is 1/252), or 9999 seeded random splits "
               "when there are more. Each line is one test; reading many at once, expect some small p by chance."),
+    "critic_tests": ("The critic's bias (Q minus the discounted return the policy obtains, figure above) of each "
+                     "complete run, averaged over epochs 1-50 (trapezoids over its evaluated epochs), for real and "
+                     "for hindsight goals: <b>config_bias</b> / <b>versus_bias</b> the means over runs, "
+                     "<b>difference</b> config minus versus, <b>p_two_sided</b> a two-sided permutation-test p-value "
+                     "of that difference (scipy.stats.permutation_test, exact up to 9999 splits). Positive bias is "
+                     "overestimation."),
     "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
                     f"{task_title(PAPER_COMPOSITION_TASK)} with HER: the paper's numbers (Fig. 2, Sec. III) beside "
                     f"this data's median over the seeds that reached epoch {PAPER_COMPOSITION_EPOCH}, rescaled to "
@@ -191,7 +198,8 @@ def _html_figure(figure: ReportFigure, image: str) -> str:
 
 
 def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[tuple[ReportFigure, str]],
-               studies: Studies, study_images: list[str], animations: dict[str, str]) -> str:
+               studies: Studies, study_images: list[str], animations: dict[str, str],
+               critic_tests: pd.DataFrame) -> str:
     """The report page: summary tables, figures (the composition table after its figure, each task's
     policy animations after its learning curves), studies, runs."""
     runs = table.runs
@@ -214,6 +222,9 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
         if figure.name == f"composition_{PAPER_COMPOSITION_TASK}" and not analysis.composition_vs_paper.empty:
             parts += [f"<h3>Minibatch composition at epoch {PAPER_COMPOSITION_EPOCH}: hersd vs paper</h3>",
                       f"<p>{TABLE_NOTES['composition']}</p>", html_table(analysis.composition_vs_paper)]
+        if figure.name == "critic_bias" and not critic_tests.empty:
+            parts += ["<h3>The critic's bias over epochs 1-50: permutation tests</h3>",
+                      f"<p>{TABLE_NOTES['critic_tests']}</p>", html_table(critic_tests)]
         parts += placed.get(figure.name, [])
     parts += placed.get(None, [])
     if studies.read:
@@ -345,12 +356,15 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
     if not analysis.tests.empty:
         tables["permutation_tests"] = analysis.tests
+    critic_tests = bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))
+    if not critic_tests.empty:
+        tables["critic_bias_tests"] = critic_tests
     written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
-                                animations), encoding="utf-8")
+                                animations, critic_tests), encoding="utf-8")
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 

@@ -79,3 +79,7 @@ def test_the_report_draws_the_critic_from_real_logs(tmp_path):
     assert len(drawn.axes) == 4
     labels = {line.get_label() for line in drawn.axes[0].get_lines()}
     assert "HER" in labels and any(label.startswith("linear") for label in labels)
+    from analysis.report import build_report
+
+    result = build_report(tmp_path, out=tmp_path / "report", log=lambda line: None)
+    assert 'id="critic_bias"' in result.index.read_text()
