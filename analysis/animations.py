@@ -3,7 +3,7 @@ median final success, side by side at matched epochs (one row per epoch, up to M
 placed after the task's learning curves.
 
 Training (``render_every``) and ``hersd-render`` write ``<run dir>/policy/epoch_<k>.gif``
-(:func:`hersd.runstore.policy_animations` finds them); this module only finds, chooses and places
+(:meth:`hersd.runstore.RunFolder.animations` finds them); this module only finds, chooses and places
 those files: it renders nothing and needs neither torch nor MuJoCo.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics import Analysis, final_success
-from hersd.runstore import policy_animations
+from hersd.runstore import RunFolder
 from hersd.tasks import task_title
 
 FOLDER = "animations"  # below the report's figures/ folder
@@ -68,7 +68,7 @@ def choose_animations(analysis: Analysis, folder: Path) -> dict[str, list[Chosen
     if complete.empty:
         return {}
     run_dirs = {run: (folder / path).parent for run, path in zip(analysis.runs["run"], analysis.runs["path"])}
-    gifs = {run: policy_animations(run_dirs[run]) for run in complete["run"].unique()}
+    gifs = {run: RunFolder(run_dirs[run]).animations() for run in complete["run"].unique()}
     chosen: dict[str, list[Chosen]] = {}
     for task, finals in final_success(complete).groupby("task", observed=True, sort=False):
         picks = [(config, found) for config, group in finals.groupby("config", observed=True, sort=True)

@@ -356,8 +356,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
     if not analysis.tests.empty:
         tables["permutation_tests"] = analysis.tests
-    critic_tests = bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))
-    if not critic_tests.empty:
+    if not (critic_tests := bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))).empty:
         tables["critic_bias_tests"] = critic_tests
     written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")

@@ -14,7 +14,7 @@ import numpy as np
 
 from hersd.config import TrainConfig
 from hersd.runlog import LOG_NAME, RunLogWriter
-from hersd.runstore import config_hash, policy_animation
+from hersd.runstore import RunFolder, config_hash
 from hersd.schedules import relabel_rate
 
 
@@ -92,7 +92,7 @@ def write_animation(folder: Path, epoch: int, width: int = 48, height: int = 36,
         left = index * (width - height // 2) // max(1, frames - 1)
         pixels[height // 4: 3 * height // 4, left: left + height // 2] = (40, 170, 60)
         images.append(Image.fromarray(pixels).quantize(8))
-    path = policy_animation(Path(folder), epoch)
+    path = RunFolder(Path(folder)).animation(epoch)
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(path, format="GIF", save_all=True, append_images=images[1:], duration=100, loop=0)
     return path

@@ -33,7 +33,7 @@ from hersd.learners import GoalConditionedLearner
 from hersd.envs import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run
-from hersd.runstore import CHECKPOINT_NAME, policy_animation
+from hersd.runstore import CHECKPOINT_NAME, RunFolder
 
 DEFAULT_EPISODES = 2
 WIDTH, HEIGHT = 240, 180  # pixels of a frame
@@ -222,7 +222,8 @@ def config_from_log(config: dict[str, Any]) -> TrainConfig:
 def load_run(directory: Path, epoch: int | None) -> tuple[TrainConfig, dict[str, Any]]:
     """A run directory's config (from its log) and checkpoint; RenderInputError (one line) when there is no
     run, no checkpoint, or ``epoch`` is not the checkpoint's."""
-    log_path, checkpoint_path = directory / LOG_NAME, directory / CHECKPOINT_NAME
+    folder = RunFolder(directory)
+    log_path, checkpoint_path = folder.log, folder.checkpoint
     if not log_path.is_file():
         raise RenderInputError(f"{directory}: not a run directory (no {LOG_NAME})")
     if not checkpoint_path.is_file():
@@ -278,7 +279,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     epoch = checkpoint["epoch"]
     try:
-        animation = render_policy(agent, cfg, epoch, args.out or policy_animation(args.run_dir, epoch), args.episodes)
+        animation = render_policy(agent, cfg, epoch, args.out or RunFolder(args.run_dir).animation(epoch), args.episodes)
     except RenderError as err:
         print(f"hersd-render: error: {err}", file=sys.stderr)
         return 1

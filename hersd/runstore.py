@@ -6,7 +6,7 @@ the search. Light (no torch): a sweep plans hundreds of runs with it.
 - ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
 - ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
 - ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
-                      it holds that process's pid while held (:func:`lock_holder`);
+                      it holds that process's pid while held (:meth:`RunFolder.holder`);
 - ``policy/epoch_<k>.gif``  an animation of the policy's test episodes after epoch k (:mod:`hersd.render`);
 - ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
 
@@ -26,12 +26,12 @@ import json
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
 from hersd.config import ConfigError, ScheduleConfig, TrainConfig
-from hersd.runlog import LOG_NAME, RunLogError, read_run
+from hersd.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 
 CHECKPOINT_NAME = "checkpoint.pt"
 LOCK_NAME = "run.lock"
@@ -95,67 +95,81 @@ def run_dir(cfg: TrainConfig) -> Path:
     return Path(cfg.results_dir) / cfg.task.name / algo / schedule_tag(cfg.schedule) / f"seed{cfg.seed}-{config_hash(cfg)}"
 
 
-def policy_animation(directory: Path, epoch: int) -> Path:
-    """Where the animation of the policy after ``epoch`` lives in a run directory."""
-    return directory / POLICY_DIR / f"epoch_{epoch}.gif"
+@dataclass(frozen=True)
+class RunFolder:
+    """One run's directory and its files, as training, rendering, the run store and a sweep's
+    status read them: the log, the checkpoint, the lock (and the pid of its holder), the policy
+    animations, the run's state and its epochs done."""
 
+    path: Path
 
-def policy_animations(directory: Path) -> dict[int, Path]:
-    """The run directory's policy animations: epoch -> path, in epoch order (none: empty)."""
-    found = {}
-    for path in (directory / POLICY_DIR).glob("epoch_*.gif"):
-        epoch = path.stem.removeprefix("epoch_")
-        if epoch.isdigit():
-            found[int(epoch)] = path
-    return dict(sorted(found.items()))
+    @property
+    def log(self) -> Path:
+        return self.path / LOG_NAME
 
+    @property
+    def checkpoint(self) -> Path:
+        return self.path / CHECKPOINT_NAME
 
-def run_state(directory: Path) -> str:
-    """``complete`` (its log says so), ``resumable`` (a checkpoint exists) or ``new``."""
-    log_path = directory / LOG_NAME
-    if log_path.exists():
+    def records(self) -> RunRecords | None:
+        """The log read back (every completed epoch, even mid-run), None without a log; RunLogError if unreadable."""
+        return read_records(self.log) if self.log.exists() else None
+
+    def state(self) -> str:
+        """``complete`` (its log says so), ``resumable`` (a checkpoint exists) or ``new``."""
         try:
-            if read_run(log_path).complete:
+            if (records := self.records()) is not None and records.complete:
                 return "complete"
         except RunLogError:
             pass
-    return "resumable" if (directory / CHECKPOINT_NAME).exists() else "new"
+        return "resumable" if self.checkpoint.exists() else "new"
 
+    def animation(self, epoch: int) -> Path:
+        """Where the animation of the policy after ``epoch`` lives."""
+        return self.path / POLICY_DIR / f"epoch_{epoch}.gif"
 
-@contextmanager
-def run_lock(directory: Path) -> Iterator[None]:
-    """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it.
-    The holder writes its pid into the lock file (:func:`lock_holder`) and empties it on release."""
-    with open(directory / LOCK_NAME, "a+") as lock_file:  # not "w": that would empty a holder's pid
-        try:
-            fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = lock_holder(directory)
-            raise RunLockedError(f"{directory} is being run by another process"
-                                 + (f" (pid {holder})" if holder else "")) from None
-        lock_file.truncate(0)
-        lock_file.write(f"{os.getpid()}\n")
-        lock_file.flush()
-        try:
-            yield
-        finally:
+    def animations(self) -> dict[int, Path]:
+        """The run's policy animations: epoch -> path, in epoch order (none: empty)."""
+        found = {}
+        for path in (self.path / POLICY_DIR).glob("epoch_*.gif"):
+            epoch = path.stem.removeprefix("epoch_")
+            if epoch.isdigit():
+                found[int(epoch)] = path
+        return dict(sorted(found.items()))
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it.
+        The holder writes its pid into the lock file (:meth:`holder`) and empties it on release."""
+        with open(self.path / LOCK_NAME, "a+") as lock_file:  # not "w": that would empty a holder's pid
+            try:
+                fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = self.holder()
+                raise RunLockedError(f"{self.path} is being run by another process"
+                                     + (f" (pid {holder})" if holder else "")) from None
             lock_file.truncate(0)
+            lock_file.write(f"{os.getpid()}\n")
+            lock_file.flush()
+            try:
+                yield
+            finally:
+                lock_file.truncate(0)
 
-
-def lock_holder(directory: Path) -> int | None:
-    """The pid of the live process holding the run's lock, as it recorded it; None when none is
-    recorded (no lock, released, or taken by hersd before locks recorded pids) or that process is gone."""
-    try:
-        pid = int((directory / LOCK_NAME).read_text().strip())
-    except (OSError, ValueError):
-        return None
-    try:
-        os.kill(pid, 0)  # signal 0: only asks whether the process exists
-    except ProcessLookupError:  # it died without releasing (kill -9): the lock is free
-        return None
-    except PermissionError:  # alive, another user's
-        pass
-    return pid
+    def holder(self) -> int | None:
+        """The pid of the live process holding the run's lock, as it recorded it; None when none is
+        recorded (no lock, released, or taken by hersd before locks recorded pids) or that process is gone."""
+        try:
+            pid = int((self.path / LOCK_NAME).read_text().strip())
+        except (OSError, ValueError):
+            return None
+        try:
+            os.kill(pid, 0)  # signal 0: only asks whether the process exists
+        except ProcessLookupError:  # it died without releasing (kill -9): the lock is free
+            return None
+        except PermissionError:  # alive, another user's
+            pass
+        return pid
 
 
 def remove_if_unused(directory: Path, up_to: Path) -> None:

@@ -33,8 +33,7 @@ from hersd.render import RenderError, render_policy, renders_at
 from hersd.resources import machine_info, resolve_device, resolve_threads
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_run
-from hersd.runstore import (CHECKPOINT_NAME, config_hash, keep_aside, policy_animation, remove_if_unused, run_dir,
-                            run_lock)
+from hersd.runstore import RunFolder, config_hash, keep_aside, remove_if_unused, run_dir
 from hersd.schedules import relabel_rate
 
 EpochCallback = Callable[[dict], None]
@@ -238,8 +237,9 @@ def train(cfg: TrainConfig, command: str = "", on_epoch: EpochCallback | None = 
 
 def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCallback | None) -> Path:
     """:func:`train` in its run directory, under the run's lock."""
-    log_path, checkpoint_path = directory / LOG_NAME, directory / CHECKPOINT_NAME
-    with run_lock(directory):
+    folder = RunFolder(directory)
+    log_path, checkpoint_path = folder.log, folder.checkpoint
+    with folder.lock():
         previous = _read_previous_log(cfg, log_path, checkpoint_path)
         if previous is not None and previous.complete:
             _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), nothing to do")
@@ -314,7 +314,7 @@ def animate(cfg: TrainConfig, state: RunState, epoch: int, directory: Path) -> N
     """Write the policy's animation after ``epoch`` (hersd.render); a failure is one warning line on stderr,
     never an error: training goes on."""
     try:
-        animation = render_policy(state.agent, cfg, epoch, policy_animation(directory, epoch))
+        animation = render_policy(state.agent, cfg, epoch, RunFolder(directory).animation(epoch))
     except Exception as err:  # noqa: BLE001  (a missing OpenGL, a full disk: the run matters more)
         reason = str(err) if isinstance(err, RenderError) else f"{type(err).__name__}: {str(err).strip()[:200]}"
         print(f"warning: {directory}: epoch {epoch}: no policy animation: {' '.join(reason.split())}",

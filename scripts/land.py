@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 from hersd.runlog import LOG_NAME, RunLogError, read_records
-from hersd.runstore import POLICY_DIR, policy_animations
+from hersd.runstore import POLICY_DIR, RunFolder
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 GIT_TRIES, GIT_WAIT = 10, 3.0  # tries of a git command that fails, seconds between them
@@ -67,10 +67,10 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
         changed = write_atomically(snapshot.read_bytes(), target / LOG_NAME)
     finally:
         snapshot.unlink(missing_ok=True)
-    animations = policy_animations(source)
+    animations = RunFolder(source).animations()
     for path in animations.values():
         changed |= write_atomically(path.read_bytes(), target / POLICY_DIR / path.name)
-    for epoch, path in policy_animations(target).items():
+    for epoch, path in RunFolder(target).animations().items():
         if epoch not in animations:
             path.unlink()
             changed = True

@@ -25,7 +25,7 @@ from omegaconf import DictConfig
 from hersd.compose import CONFIG_PATH, group_options
 from hersd.config import ConfigError
 from hersd.resources import available_cores, resolve_threads
-from hersd.runstore import RunLockedError, run_dir, run_state
+from hersd.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error
 from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas  # noqa: F401
 from sweeps.status import run_status
@@ -66,7 +66,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         raise SweepError(str(err), exit_code=2) from None
     check_launcher(sweeper.config.hydra.launcher)
     planned = plan_runs(sweeper, arguments)
-    states = {directory: run_state(directory) for directory in planned}
+    states = {directory: RunFolder(directory).state() for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
           f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
@@ -167,7 +167,7 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     hydra_cfg = HydraConfig.get()
     train_cfg = job_train_config(cfg)
     directory = run_dir(train_cfg)
-    state = run_state(directory)
+    state = RunFolder(directory).state()
     outcome: dict[str, Any] = {"run_dir": str(directory)}
     tic = time.time()
     try:

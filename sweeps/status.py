@@ -16,8 +16,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from hersd.runlog import LOG_NAME, RunLogError, read_records
-from hersd.runstore import CHECKPOINT_NAME, lock_holder
+from hersd.runlog import RunLogError
+from hersd.runstore import RunFolder
 
 PACE_EPOCHS = 5  # a run's pace: the mean time of its last this many epochs
 
@@ -31,21 +31,21 @@ def ago(seconds: float) -> str:
 def run_status(directory: Path, epochs: int, now: float | None = None) -> tuple[str, str]:
     """(state, detail) of the run in ``directory`` planned for ``epochs`` epochs, e.g.
     ``("running", "epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago")``."""
-    log = directory / LOG_NAME
-    holder = lock_holder(directory)
+    folder = RunFolder(directory)
+    holder = folder.holder()
     done: list = []
     detail = []
-    if log.exists():
-        try:
-            records = read_records(log)
-        except RunLogError as err:
-            detail.append(f"log unreadable ({str(err).removeprefix(f'{log}: ')})")
-        else:
-            if records.complete:
-                return "complete", f"{len(records.records)} epochs"
+    try:
+        records = folder.records()
+    except RunLogError as err:
+        detail.append(f"log unreadable ({str(err).removeprefix(f'{folder.log}: ')})")
+    else:
+        if records is not None and records.complete:
+            return "complete", f"{len(records.records)} epochs"
+        if records is not None:
             done = records.records
             detail.append(f"epoch {len(done)} of {epochs}")
-    elif holder is not None:
+    if not done and holder is not None and not detail:
         detail.append(f"epoch 0 of {epochs}")
     if holder is not None:
         detail.append(f"pid {holder}")
@@ -54,8 +54,8 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> tuple[
             per_epoch = sum(recent) / len(recent)
             detail.append(f"{per_epoch:.0f} s per epoch, ~{ago(per_epoch * max(epochs - len(done), 0))} to go")
     if done:
-        detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - log.stat().st_mtime))} ago")
-    has_checkpoint = (directory / CHECKPOINT_NAME).exists()
+        detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - folder.log.stat().st_mtime))} ago")
+    has_checkpoint = folder.checkpoint.exists()
     if holder is not None:
         return "running", ", ".join(detail)
     if has_checkpoint:

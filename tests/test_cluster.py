@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from hersd.runlog import read_run
-from hersd.runstore import run_state
+from hersd.runstore import RunFolder
 from servers import SlurmCluster, postgres_database, slurm_cluster, wait_until
 
 # One xdist worker runs them all: the SLURM cluster is started once per module and owns system paths.
@@ -92,7 +92,7 @@ def test_slurm_sweep_killed_part_way_resubmits_without_loss_or_repeats(slurm: Sl
         submitit ignores SIGTERM and the job trains on until SIGKILL (KillWait=2 s later)."""
         if first.poll() is not None:
             raise AssertionError(f"the sweep ended before the kill:\n{first_log.read_text()[-3000:]}")
-        states = {run: run_state(run) for run in runs}
+        states = {run: RunFolder(run).state() for run in runs}
         early = [run for run, state in states.items()
                  if state == "resumable" and len(read_run(run / "run.mcap").epochs) <= EPOCHS // 4]
         return "complete" in states.values() and bool(early)
@@ -102,7 +102,7 @@ def test_slurm_sweep_killed_part_way_resubmits_without_loss_or_repeats(slurm: Sl
     finally:
         kill_group(first)
         slurm.cancel_all()  # scancel the killed sweep's jobs; waits until they have left the queue
-    at_kill = {run: run_state(run) for run in runs}
+    at_kill = {run: RunFolder(run).state() for run in runs}
     epochs_at_kill = {run: len(read_run(run / "run.mcap").epochs) for run in runs if at_kill[run] == "resumable"}
     finished = {run: (run / "run.mcap").read_bytes() for run in runs if at_kill[run] == "complete"}
     counts = {state: list(at_kill.values()).count(state) for state in ("complete", "resumable", "new")}

@@ -15,7 +15,7 @@ import hersd.render
 import hersd.train
 from hersd.compose import compose_train
 from hersd.render import RenderError, close_render_env, headless_backend, main, make_render_env, renders_at
-from hersd.runstore import CHECKPOINT_NAME, policy_animation, policy_animations
+from hersd.runstore import CHECKPOINT_NAME, RunFolder
 from hersd.train import train
 
 RUN = [*(o for o in TINY if o != "render_every=0"), "epochs=2", "seed=5", "quiet=true", "threads=1"]
@@ -40,17 +40,17 @@ def test_rendering_changes_no_metric_and_no_run_folder(runs):
     rendered, plain = runs["1"], runs["0"]
     pd.testing.assert_frame_equal(metrics(rendered), metrics(plain))
     assert rendered.relative_to(rendered.parents[4]) == plain.relative_to(plain.parents[4])  # <task>/.../seedN-<hash>
-    assert list(policy_animations(rendered.parent)) == [1, 2]
-    assert policy_animations(plain.parent) == {}
+    assert list(RunFolder(rendered.parent).animations()) == [1, 2]
+    assert RunFolder(plain.parent).animations() == {}
 
 
 def test_the_animation_shows_the_scene_moving(runs):
-    path = policy_animation(runs["1"].parent, 2)
+    path = RunFolder(runs["1"].parent).animation(2)
     frames = gif_frames(path)
     assert frames[0].shape == (hersd.render.HEIGHT, hersd.render.WIDTH, 3)
     assert len(frames) == 2 * (50 // hersd.render.FRAME_STEP + 1)  # 2 episodes: the start and every 2nd step
     assert all(frame.std() > 20 for frame in frames[::10])  # not blank: table, robot, floor
-    assert all(frame.std() > 20 for frame in gif_frames(policy_animation(runs["1"].parent, 1))[::10])
+    assert all(frame.std() > 20 for frame in gif_frames(RunFolder(runs["1"].parent).animation(1))[::10])
     assert np.abs(frames[0].astype(int) - frames[len(frames) // 4]).mean() > 0.5  # the arm moved
     assert 20_000 < path.stat().st_size < 400_000
 
@@ -59,7 +59,7 @@ def test_hersd_render_draws_the_checkpoints_epoch_as_training_did(runs, tmp_path
     directory = runs["1"].parent
     out = tmp_path / "again.gif"
     assert main([str(directory), "--epoch", "2", "--out", str(out)]) == 0
-    assert out.read_bytes() == policy_animation(directory, 2).read_bytes()
+    assert out.read_bytes() == RunFolder(directory).animation(2).read_bytes()
     assert f"{out} (epoch 2, 52 frames" in capsys.readouterr().out
 
 
@@ -99,7 +99,7 @@ def test_a_failed_render_is_a_warning_and_the_run_goes_on(tmp_path, monkeypatch,
     log = train(compose_train([*RUN, "epochs=1", "render_every=1", f"results_dir={tmp_path}"]))
     err = capsys.readouterr().err
     assert err.count("warning:") == 1 and "epoch 1: no policy animation: no headless OpenGL" in err
-    assert metrics(log)["epoch"].tolist() == [1] and policy_animations(log.parent) == {}
+    assert metrics(log)["epoch"].tolist() == [1] and RunFolder(log.parent).animations() == {}
 
 
 def test_headless_rendering_picks_egl_then_osmesa_else_names_the_packages(monkeypatch):

@@ -12,7 +12,7 @@ import numpy as np
 
 from analysis.synthetic import write_run
 from hersd.config import TrainConfig
-from hersd.runstore import LOCK_NAME, RunLockedError, lock_holder, run_lock
+from hersd.runstore import LOCK_NAME, RunFolder
 from sweeps.status import run_status
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
@@ -25,20 +25,20 @@ def write_log(directory: Path, epochs_done: int, complete: bool = False) -> Path
 
 
 def test_the_lock_records_its_holders_pid_while_held(tmp_path):
-    assert lock_holder(tmp_path) is None
-    with run_lock(tmp_path):
-        assert lock_holder(tmp_path) == os.getpid()
-        code = f"from hersd.runstore import run_lock; from pathlib import Path\nwith run_lock(Path({str(tmp_path)!r})): pass"
+    assert RunFolder(tmp_path).holder() is None
+    with RunFolder(tmp_path).lock():
+        assert RunFolder(tmp_path).holder() == os.getpid()
+        code = f"from hersd.runstore import RunFolder; from pathlib import Path\nwith RunFolder(Path({str(tmp_path)!r})).lock(): pass"
         taken = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
         assert f"being run by another process (pid {os.getpid()})" in taken.stderr  # and it kept the pid
-        assert lock_holder(tmp_path) == os.getpid()
-    assert lock_holder(tmp_path) is None and (tmp_path / LOCK_NAME).read_text() == ""
+        assert RunFolder(tmp_path).holder() == os.getpid()
+    assert RunFolder(tmp_path).holder() is None and (tmp_path / LOCK_NAME).read_text() == ""
 
 
 def test_a_dead_holders_pid_is_no_holder(tmp_path):
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     (tmp_path / LOCK_NAME).write_text(ended.stdout)  # as a holder killed with -9 leaves it
-    assert lock_holder(tmp_path) is None
+    assert RunFolder(tmp_path).holder() is None
 
 
 def test_each_state_with_its_progress(tmp_path):
@@ -55,7 +55,7 @@ def test_each_state_with_its_progress(tmp_path):
     assert run_status(tmp_path / "lost", 200)[0] == "new"
     assert "epoch 5 of 200" in run_status(tmp_path / "lost", 200)[1]
     write_log(tmp_path / "training", 7)
-    with run_lock(tmp_path / "training"):
+    with RunFolder(tmp_path / "training").lock():
         state, detail = run_status(tmp_path / "training", 200, now=now)
     assert state == "running"
     assert detail.startswith(f"epoch 7 of 200, pid {os.getpid()}, 45 s per epoch, ~2.4 h to go")  # 193 x 45 s
@@ -67,7 +67,7 @@ def test_a_dry_run_lists_each_run_with_its_state_and_the_pids_training(tmp_path)
     runs = [Path(line.split()[1]) for line in first.splitlines() if line.startswith("  new ")]
     write_log(runs[0], 4, complete=True)
     write_log(runs[1], 2)
-    with run_lock(runs[1]):
+    with RunFolder(runs[1]).lock():
         out = subprocess.run([*SWEEP, *args], capture_output=True, text=True, check=True).stdout.splitlines()
     assert out[1].split()[:3] == ["complete", str(runs[0]), "4"]
     assert out[2].split()[:2] == ["running", str(runs[1])] and f"epoch 2 of 4, pid {os.getpid()}," in out[2]

@@ -13,7 +13,7 @@ import pytest
 
 from hersd.resources import available_cores
 from hersd.runlog import read_run
-from hersd.runstore import run_lock
+from hersd.runstore import RunFolder
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
@@ -206,7 +206,7 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
     args = ["+grid=smoke", "schedule=constant", "seeds=2", "epochs=1", *TINY, f"results_dir={tmp_path}"]
     held = Path([r for r in listed_runs(sweep(*args, "--dry-run").stdout) if "/seed0-" in r][0])
     held.mkdir(parents=True)
-    with run_lock(held):
+    with RunFolder(held).lock():
         result = sweep(*args, "threads=1")
     assert "1 done" in result.stdout and "1 running elsewhere" in result.stdout and "0 failed" in result.stdout
     assert not (held / "run.mcap").exists()

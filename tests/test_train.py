@@ -15,7 +15,7 @@ from hersd.cli import main
 from hersd.compose import compose_train as compose
 from hersd.resources import available_cores
 from hersd.runlog import read_run
-from hersd.runstore import RunLockedError, run_dir, run_lock
+from hersd.runstore import RunFolder, RunLockedError, run_dir
 from hersd.train import train
 
 TINY = [*TINY_RUN, "quiet=true", "threads=1"]
@@ -166,7 +166,7 @@ def test_checkpoint_without_log_is_kept_aside_and_the_run_starts_afresh(tmp_path
 def test_a_locked_run_is_not_run_twice(tmp_path):
     cfg = compose([*TINY, "epochs=1", f"results_dir={tmp_path}"])
     run_dir(cfg).mkdir(parents=True)
-    with run_lock(run_dir(cfg)):
+    with RunFolder(run_dir(cfg)).lock():
         with pytest.raises(RunLockedError):
             train(cfg)
     assert not (run_dir(cfg) / "run.mcap").exists()
