@@ -9,7 +9,9 @@ CAMPAIGN_DIR defaults to ~/hersd-campaign (a sweep's ``results_dir``), RESULTS t
 repository's ``results/``. Every file is written through a temporary file and a rename, so no
 copy is ever half written; a complete log there is never replaced by an unfinished one (``kept``);
 animations there that the run no longer has (an earlier attempt's, when it restarted) are
-removed. One line per run: ``landed``, ``unchanged`` or ``kept``, with its state.
+removed. An unfinished log there with more epochs than the campaign's (the run restarted without
+a checkpoint and has not caught up) is kept too, until the new attempt passes it. One line per
+run: ``landed``, ``unchanged`` or ``kept``, with its state.
 
 ``--commit``: each complete run whose files differ from git's is committed alone, those files
 only (whatever else is staged stays staged): ``results: <run> complete (K epochs)``. A git
@@ -34,14 +36,14 @@ REPOSITORY = Path(__file__).resolve().parent.parent
 GIT_TRIES, GIT_WAIT = 10, 3.0  # tries of a git command that fails, seconds between them
 
 
-def log_state(path: Path) -> tuple[bool, str]:
-    """(complete, ``complete (K epochs)`` / ``epoch N`` / ``unreadable``) of a log file."""
+def log_state(path: Path) -> tuple[bool, int, str]:
+    """(complete, epochs, ``complete (K epochs)`` / ``epoch N`` / ``unreadable``) of a log file."""
     try:
         records = read_records(path)
     except RunLogError:
-        return False, "unreadable"
-    return records.complete, (f"complete ({len(records.records)} epochs)" if records.complete
-                              else f"epoch {len(records.records)}")
+        return False, -1, "unreadable"
+    epochs = len(records.records)
+    return records.complete, epochs, (f"complete ({epochs} epochs)" if records.complete else f"epoch {epochs}")
 
 
 def write_atomically(data: bytes, target: Path) -> bool:
@@ -61,9 +63,11 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
     snapshot.parent.mkdir(parents=True, exist_ok=True)
     snapshot.write_bytes((source / LOG_NAME).read_bytes())  # one snapshot of a log that may be growing
     try:
-        complete, state = log_state(snapshot)
-        if not complete and (target / LOG_NAME).exists() and log_state(target / LOG_NAME)[0]:
-            return "kept", True, f"{log_state(target / LOG_NAME)[1]} (the campaign's copy: {state})"
+        complete, epochs, state = log_state(snapshot)
+        if not complete and (target / LOG_NAME).exists():
+            landed_complete, landed_epochs, landed_state = log_state(target / LOG_NAME)
+            if landed_complete or landed_epochs > epochs:  # a run that restarted has not caught up yet
+                return "kept", landed_complete, f"{landed_state} (the campaign's copy: {state})"
         changed = write_atomically(snapshot.read_bytes(), target / LOG_NAME)
     finally:
         snapshot.unlink(missing_ok=True)

@@ -91,6 +91,18 @@ def test_a_complete_log_is_never_replaced_by_an_unfinished_one_and_stale_animati
     assert git(repo, "log", "--format=%s") == "start\n"  # no --commit: nothing committed
 
 
+def test_an_unfinished_log_with_more_epochs_is_kept_until_a_restarted_run_passes_it(tmp_path, repo):
+    campaign, results = tmp_path / "campaign", repo / "results"
+    write_log(results / RUNNING, 39)  # landed at a stop; the run then restarted without a checkpoint
+    write_log(campaign / RUNNING, 2)
+    out = land(campaign, repo).stdout
+    assert f"kept      {results / RUNNING / 'run.mcap'}  epoch 39 (the campaign's copy: epoch 2)" in out
+    assert len(read_records(results / RUNNING / "run.mcap").records) == 39
+    write_log(campaign / RUNNING, 40)
+    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 40" in land(campaign, repo).stdout
+    assert len(read_records(results / RUNNING / "run.mcap").records) == 40
+
+
 def test_a_missing_campaign_folder_is_one_line_and_exit_2(tmp_path, repo):
     result = land(tmp_path / "nowhere", repo)
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "no folder" in result.stderr
