@@ -273,7 +273,7 @@ class BiasConfig:
 
     def __post_init__(self) -> None:
         _check(all(isinstance(k, int) and k >= 1 for k in self.epochs),
-               f"bias.epochs must list epochs >= 1 ([] for never), got {list(self.epochs)}")
+               f"bias.epochs must be a list of epochs >= 1 ([] for never), got {list(self.epochs)}")
         _check(self.episodes >= 1, f"bias.episodes must be >= 1, got {self.episodes}")
         _check(self.hindsight_pairs >= 0, f"bias.hindsight_pairs must be >= 0, got {self.hindsight_pairs}")
         _check(self.return_steps >= 1, f"bias.return_steps must be >= 1, got {self.return_steps}")

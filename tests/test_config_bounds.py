@@ -17,7 +17,7 @@ import hersd.run_state
 import hersd.train
 from hersd.cli import main
 from hersd.compose import compose_train
-from hersd.config import (AlgoConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
+from hersd.config import (AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
                           TD3Config, TrainConfig)
 from hersd.envs import EnvSpec
 from hersd.runlog import read_run
@@ -36,7 +36,7 @@ SCHEMAS = {  # the field's owner, built with one setting -> a config object
     "algo.mep": MEPConfig, "algo": AlgoConfig, "ddpg": DDPGConfig,
     "schedule": lambda **s: ScheduleConfig(kind="exponential", **s),
     "schedule.mean_rate": lambda **s: ScheduleConfig(kind="linear", **s),
-    "learner.td3": TD3Config, "learner.sac": SACConfig, "": _reach,
+    "learner.td3": TD3Config, "learner.sac": SACConfig, "bias": BiasConfig, "": _reach,
 }
 WEIGHT = ([0.0, -1.0, 9.9e-7, 1.1e6, HUGE, INF, NAN], [1e-6, 1.0, 1e6])  # lambda, alpha: [1e-6, 1e6]
 SHARE = ([-0.1, 1.1, HUGE, INF, NAN], [0.0, 1.0])  # probabilities and rates: [0, 1]
@@ -67,6 +67,8 @@ TABLE: dict[str, tuple[list, list]] = {
     "learner.td3.policy_delay": COUNT,
     "learner.sac.init_alpha": WEIGHT, "learner.sac.alpha_lr": RATE,
     "learner.sac.target_entropy": ([-1.1e6, 1.1e6, -HUGE, HUGE, INF, -INF, NAN], [-1e6, 0.0, 1e6, None]),
+    "bias.epochs": ([[0], [-1], [1, 0]], [[], [1], [1, 2, 200]]),
+    "bias.episodes": COUNT, "bias.return_steps": COUNT, "bias.hindsight_pairs": ([-1], [0, 1]),
     "seed": ([-1], [0, BIG_INT]), "epochs": COUNT, "checkpoint_every": ([-1], [0, BIG_INT]),
     "render_every": ([-1], [0, BIG_INT]),
     "threads": (["0", "1025", "-1", "1e3"], ["auto", "1", "1024"]),
