@@ -155,3 +155,25 @@ def test_only_the_learner_in_use_is_part_of_a_runs_identity():
     assert config_hash(td3) != config_hash(ddpg)
     assert config_hash(compose_train(["task=push", "learner=td3", "learner.sac.alpha_lr=0.1"])) == config_hash(td3)
     assert config_hash(compose_train(["task=push", "learner=td3", "learner.td3.policy_delay=3"])) != config_hash(td3)
+
+
+def _leaves(node, path: tuple = ()) -> dict[tuple, object]:
+    """A YAML mapping's values by their key path (lists are values)."""
+    if isinstance(node, dict):
+        return {leaf: value for key, child in node.items() for leaf, value in _leaves(child, (*path, key)).items()}
+    return {path: node}
+
+
+@pytest.mark.parametrize("name", sorted(path.stem for path in (Path(__file__).resolve().parent.parent
+                                                                 / "conf" / "search").glob("*.yaml")))
+def test_search_files_state_only_what_differs_from_the_schema(name):
+    import yaml
+
+    from sweeps.search.config import SearchConfig
+
+    root = Path(__file__).resolve().parent.parent
+    stated = yaml.safe_load((root / "conf" / "search" / f"{name}.yaml").read_text(encoding="utf-8"))
+    stated.pop("defaults")
+    schema = _leaves(asdict(SearchConfig()))
+    restated = [".".join(key) for key, value in _leaves(stated).items() if key in schema and schema[key] == value]
+    assert not restated, f"conf/search/{name}.yaml restates the schema's defaults: {restated}"

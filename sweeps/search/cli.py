@@ -28,7 +28,7 @@ USAGE = """usage: hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OV
 
 Optuna search of the relabel-rate schedule (beta1, beta2; optionally lambda_h and the kind).
 Each trial trains one run per seed through the run store; re-running the same command
-resumes the study. search.* settings: conf/search/default.yaml and sweeps/search/config.py;
+resumes the study. search.* settings: SearchConfig in sweeps/search/config.py, conf/search/*.yaml;
 every other override goes to the training config as for hersd-train (task=reach epochs=50 ...).
 
   search=default|wide|ci        search.n_trials=50  search.n_jobs=2  search.seeds=3

@@ -267,4 +267,4 @@ def _composition_error(err: Exception) -> str:
     key = getattr(cause, "full_key", None) or ""
     if key.startswith("search.enqueue") or str(err).startswith("Error merging override search.enqueue"):
         return "search.enqueue must be a list of mappings like [{beta1: 0.25, beta2: 0.25}]"
-    return explain_config_error(err, what="search setting", see="conf/search/default.yaml")
+    return explain_config_error(err, what="search setting", see="SearchConfig in sweeps/search/config.py")
