@@ -12,12 +12,13 @@ Every default is the seed paper's appendix setting (which follows the reference 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import List, Optional
+from dataclasses import asdict, dataclass, field
+from typing import Any, List, Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-from hersd.schedules import BETA2_LIMIT, SCHEDULE_KINDS, beta1_for_mean_rate
+from hersd.errors import ConfigError
+from hersd.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config
 from hersd.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
@@ -41,10 +42,6 @@ LR_LIMIT = 1.0
 # (1 + 1/temperature) * ln(n) < 709.8: with temperature >= 0.05, for n < 4e14 episodes (any memory).
 MEP_MIN_TEMPERATURE = 0.05
 MAX_THREADS = 1024  # threads=N at most: torch takes a C int, and no machine here has more cores
-
-
-class ConfigError(ValueError):
-    """A configuration value is out of range; the message is one line for the user."""
 
 
 def _check(condition: bool, message: str) -> None:
@@ -135,49 +132,10 @@ class AlgoConfig:
             _check_number(f"algo.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
 
 
-@dataclass
-class ScheduleConfig:
-    kind: str = "constant"  # constant (HER) | linear (eq. 9, beta2 = 0) | exponential (eq. 9) | success (see below)
-    eps: float = 0.8  # the fixed relabel rate of kind=constant (HER: 0.8, i.e. replay_k = 4)
-    beta1: float = 0.0  # eq. 9: final drop of the rate, in [0, 1]
-    beta2: float = 0.0  # eq. 9: shape, in [-50, 50]; 0 is linear, > 0 concave, < 0 convex
-    # If set, beta1 is solved from it: the beta1 whose mean rate over the run's K epochs
-    # (eq. 10, exact) equals mean_rate. Used by the iso_mu grid and the search.
-    mean_rate: Optional[float] = None
-    # kind=success: eps(k) = clip(1 - beta1 * s(k), eps_min, 1), s(k) = mean train success of the
-    # `window` epochs before k (s(1) = 0), so the rate falls as the agent succeeds (hersd/schedules.py).
-    window: int = 10  # epochs of train success averaged by kind=success
-    eps_min: float = 0.0  # lower bound of the rate of kind=success
-
-    def __post_init__(self) -> None:
-        _check(self.kind in SCHEDULE_KINDS,
-               f"schedule.kind={self.kind!r} is unknown; choose one of: {', '.join(SCHEDULE_KINDS)}")
-        _check(_is_finite(self.eps) and 0.0 <= self.eps <= 1.0,
-               f"schedule.eps must be a number in [0, 1], got {self.eps}")
-        _check(_is_finite(self.beta1) and 0.0 <= self.beta1 <= 1.0,
-               f"schedule.beta1 must be a number in [0, 1], got {self.beta1}")
-        _check(_is_finite(self.beta2) and abs(self.beta2) <= BETA2_LIMIT,
-               f"schedule.beta2 must be a number in [-{BETA2_LIMIT:g}, {BETA2_LIMIT:g}] (eq. 9 is a step "
-               f"function beyond), got {self.beta2}")
-        _check(self.kind != "linear" or self.beta2 == 0.0,
-               f"schedule.beta2 must be 0 for schedule=linear (got {self.beta2}); use schedule=exponential")
-        _check(self.window >= 1, f"schedule.window must be >= 1, got {self.window}")
-        _check(_is_finite(self.eps_min) and 0.0 <= self.eps_min <= 1.0,
-               f"schedule.eps_min must be a number in [0, 1], got {self.eps_min}")
-        if self.mean_rate is not None:
-            _check(self.kind in ("linear", "exponential"), "schedule.mean_rate applies to linear/exponential "
-                                                          "schedules; for schedule=constant set schedule.eps")
-            _check(_is_finite(self.mean_rate) and 0.0 <= self.mean_rate <= 1.0,
-                   f"schedule.mean_rate must be a number in [0, 1], got {self.mean_rate}")
-
-    def solve_beta1(self, total_epochs: int) -> None:
-        """Set beta1 from mean_rate (see :func:`hersd.schedules.beta1_for_mean_rate`)."""
-        if self.mean_rate is None:
-            return
-        beta1 = beta1_for_mean_rate(self.mean_rate, self.beta2, total_epochs)
-        _check(beta1 <= 1.0, f"schedule.mean_rate={self.mean_rate} with beta2={self.beta2} needs beta1="
-                             f"{beta1:.3f} > 1; raise mean_rate or lower beta2")
-        self.beta1 = beta1
+def ScheduleConfig(kind: str = DEFAULT.kind, **settings: Any) -> Schedule:
+    """The schedule of ``kind`` (a registered name or a class path) with ``settings``, checked and not yet
+    resolved for a K: how code and tests build a schedule, as they built the flat schema's dataclass."""
+    return schedule_class(kind)(**settings)
 
 
 @dataclass
@@ -283,7 +241,9 @@ class BiasConfig:
 class TrainConfig:
     task: TaskConfig = field(default_factory=TaskConfig)
     algo: AlgoConfig = field(default_factory=AlgoConfig)
-    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    # The relabel-rate schedule: kind=<name> (or _target_=<module>.<Class>) and that kind's settings
+    # (hersd-train --help lists them); a hersd.schedules.Schedule once the config is built. {}: HER's constant.
+    schedule: Any = field(default_factory=dict)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     bias: BiasConfig = field(default_factory=BiasConfig)
@@ -302,11 +262,12 @@ class TrainConfig:
     # Thread counts can change floating-point sums: logged, not part of the run's identity.
     threads: str = "auto"
     device: str = "auto"  # where networks and updates run: auto (cuda if available, else cpu) | cpu | cuda[:N]
-    # Treat denormal floats (|x| < 1.2e-38) as zero during the learner's updates, on the training thread
-    # (torch.set_flush_denormal): Adam's moments of units whose gradient died decay through the denormal
-    # range for thousands of steps, and x86 CPUs compute on denormals many times slower. Changes
-    # floating-point results as thread counts do: logged, not part of the run's identity.
-    flush_denormal: bool = False
+    # Treat denormal floats (|x| < 1.2e-38) as zero in the run's torch work (updates, acting, bias evaluation,
+    # animations; every intra-op thread; the physics stays IEEE), as the reference's TensorFlow does for its
+    # kernels (hersd/denormals.py). Adam's moments of units whose gradient died decay through the denormal
+    # range for thousands of steps, and x86 CPUs compute on denormals many times slower. false retraces runs
+    # made without it. Changes floating-point results as a CPU type does: logged, not part of the run's identity.
+    flush_denormal: bool = True
 
     def __post_init__(self) -> None:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
@@ -319,7 +280,16 @@ class TrainConfig:
             self.device.startswith("cuda:") and self.device[5:].isdigit())),
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
         self.task.resolve()
-        self.schedule.solve_beta1(self.epochs)
+        if isinstance(self.schedule, Schedule):
+            self.schedule.resolve(self.epochs)
+        else:
+            self.schedule = schedule_from_config(self.schedule, self.epochs)
+
+
+def config_record(cfg: TrainConfig) -> dict[str, Any]:
+    """The config as a nested dict, as a log's ``/run/meta`` holds it: the schedule as its record
+    (:meth:`hersd.schedules.Schedule.record`)."""
+    return {**asdict(cfg), "schedule": cfg.schedule.record()}
 
 
 def to_train_config(cfg: DictConfig) -> TrainConfig:

@@ -29,6 +29,7 @@ import torch
 from PIL import Image
 
 from hersd.config import ConfigError, TaskConfig, TrainConfig, to_train_config
+from hersd.denormals import denormals_flushed, set_intra_op_threads
 from hersd.learners import GoalConditionedLearner
 from hersd.envs import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
@@ -145,15 +146,17 @@ def _frame(env: Any, success: bool) -> np.ndarray:
 
 
 def episode_frames(env: Any, agent: GoalConditionedLearner, horizon: int, seed: int,
-                   rng: np.random.Generator) -> tuple[list[np.ndarray], bool]:
+                   rng: np.random.Generator, flush_denormal: bool) -> tuple[list[np.ndarray], bool]:
     """One deterministic test episode from ``env.reset(seed=seed)`` -> (its frames: the start, then every
-    FRAME_STEP-th step and the last, each (HEIGHT, WIDTH, 3) uint8; success at the last step)."""
+    FRAME_STEP-th step and the last, each (HEIGHT, WIDTH, 3) uint8; success at the last step). The policy
+    acts with denormals flushed to zero as in the run (``flush_denormal``)."""
     obs = env.reset(seed=seed)[0]
     success = False
     frames = [_frame(env, success)]
     for step in range(1, horizon + 1):
-        action = agent.act(obs["observation"][None].astype(np.float32),
-                           obs["desired_goal"][None].astype(np.float32), explore=False, rng=rng)[0]
+        with denormals_flushed(flush_denormal):
+            action = agent.act(obs["observation"][None].astype(np.float32),
+                               obs["desired_goal"][None].astype(np.float32), explore=False, rng=rng)[0]
         obs, _reward, _terminated, _truncated, info = env.step(action)
         success = step_success(info)
         if step % FRAME_STEP == 0 or step == horizon:
@@ -174,7 +177,7 @@ def render_frames(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int,
         frame_ms = round(1000 * float(getattr(env, "dt", 0.04)) * FRAME_STEP)
         frames, durations, successes = [], [], []
         for seed in rng.integers(2**31, size=episodes):
-            episode, success = episode_frames(env, agent, horizon, int(seed), rng)
+            episode, success = episode_frames(env, agent, horizon, int(seed), rng, cfg.flush_denormal)
             frames += episode
             durations += [frame_ms] * (len(episode) - 1) + [END_PAUSE_MS]
             successes.append(success)
@@ -274,6 +277,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         cfg, checkpoint = load_run(args.run_dir, args.epoch)
         agent = policy_from_checkpoint(cfg, checkpoint)
+        set_intra_op_threads(cfg.flush_denormal)
     except (RenderInputError, ConfigError) as err:
         print(f"hersd-render: error: {err}", file=sys.stderr)
         return 2

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -24,8 +23,8 @@ import torch
 
 import hersd
 from hersd.bias import GOAL_TYPES, BiasEvaluator
-from hersd.config import TrainConfig
-from hersd.denormals import denormals_flushed
+from hersd.config import TrainConfig, config_record
+from hersd.denormals import denormals_flushed, set_intra_op_threads, thread_flush_states
 from hersd.learners import GoalConditionedLearner, UpdateStats, learner_class
 from hersd.envs import step_success
 from hersd.replay import Episodes, TransitionBatch, sample_transitions
@@ -34,7 +33,6 @@ from hersd.resources import machine_info, resolve_device, resolve_threads
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_run
 from hersd.runstore import RunFolder, config_hash, keep_aside, remove_if_unused, run_dir
-from hersd.schedules import relabel_rate
 
 EpochCallback = Callable[[dict], None]
 
@@ -64,10 +62,11 @@ def check_finite(cfg: TrainConfig, record: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- the steps of an epoch
 def run_episodes(envs: list, agent: GoalConditionedLearner, horizon: int, explore: bool,
-                 rng: np.random.Generator) -> tuple[Episodes, np.ndarray]:
+                 rng: np.random.Generator, flush_denormal: bool) -> tuple[Episodes, np.ndarray]:
     """One episode in each env, stepped in lockstep -> (Episodes of n = len(envs), success (n,) bool at the
     last step). Each step's goal is the desired goal of its observation (constant in Fetch, Hand and the
-    registered mazes; an env may move it once reached)."""
+    registered mazes; an env may move it once reached). The policy acts with denormals flushed to zero
+    (``flush_denormal``); the physics steps in IEEE arithmetic."""
     n = len(envs)
     first = [env.reset()[0] for env in envs]
     obs = np.empty((n, horizon + 1, first[0]["observation"].shape[0]), np.float32)
@@ -80,7 +79,8 @@ def run_episodes(envs: list, agent: GoalConditionedLearner, horizon: int, explor
     success = np.zeros(n, bool)
     for t in range(horizon):
         goals[:, t] = desired
-        actions[:, t] = agent.act(obs[:, t], goals[:, t], explore, rng)
+        with denormals_flushed(flush_denormal):
+            actions[:, t] = agent.act(obs[:, t], goals[:, t], explore, rng)
         for i, env in enumerate(envs):
             step_obs, _reward, _terminated, _truncated, info = env.step(actions[i, t])
             obs[i, t + 1] = step_obs["observation"]
@@ -158,7 +158,8 @@ def collect(state: RunState, relabel_prob: float, stats: EpochStats) -> None:
     """Run one episode per training env, store them, and update the input normalisers from their
     transitions relabelled as training will see them (the reference code's normaliser update)."""
     cfg, horizon = state.cfg, state.spec.horizon
-    episodes, success = run_episodes(state.train_envs, state.agent, horizon, explore=True, rng=state.rng)
+    episodes, success = run_episodes(state.train_envs, state.agent, horizon, explore=True, rng=state.rng,
+                                     flush_denormal=cfg.flush_denormal)
     stats.train_success.append(success)
     state.env_steps += len(state.train_envs) * horizon
     slots = state.buffer.store(episodes)
@@ -191,7 +192,7 @@ def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
     success, distance = [], []
     for _ in range(state.cfg.ddpg.test_rollouts):
         episodes, episode_success = run_episodes(state.test_envs, state.agent, state.spec.horizon, explore=False,
-                                                 rng=state.rng)
+                                                 rng=state.rng, flush_denormal=state.cfg.flush_denormal)
         success.append(episode_success)
         distance.append(np.linalg.norm(episodes.achieved[:, -1] - episodes.goal[:, -1], axis=-1))
     return np.concatenate(success), np.concatenate(distance)
@@ -200,7 +201,7 @@ def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
 def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
     """Epoch k of Algorithm 1 -> its log record."""
     cfg = state.cfg
-    stats = EpochStats(epoch, relabel_rate(cfg.schedule, epoch, cfg.epochs, state.train_success))
+    stats = EpochStats(epoch, cfg.schedule.rate(epoch, cfg.epochs, state.train_success))
     if state.prioritizer is not None:  # refit the density on the episodes stored so far (none in epoch 1)
         with stats.timed("mep_fit"):
             state.prioritizer.fit(state.buffer.stored().achieved, state.rng)
@@ -246,6 +247,7 @@ def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCa
             return log_path
         threads, device = resolve_threads(cfg.threads), resolve_device(cfg.device)
         torch.set_num_threads(threads)
+        _flush_intra_op_threads(cfg)
         checkpoint = _read_checkpoint(cfg, checkpoint_path, previous, device)
         if previous is not None and checkpoint is None:
             _say(cfg, f"{log_path}: incomplete and without checkpoint; kept as "
@@ -361,10 +363,21 @@ def _say(cfg: TrainConfig, line: str) -> None:
         print(line, flush=True)
 
 
+def _flush_intra_op_threads(cfg: TrainConfig) -> None:
+    """Every intra-op thread set to the run's ``flush_denormal`` (hersd/denormals.py), then checked on each
+    thread: a thread that disagrees (a CPU without FTZ/DAZ, an OpenMP runtime not found) is one warning line."""
+    set_intra_op_threads(cfg.flush_denormal)
+    with denormals_flushed(cfg.flush_denormal):
+        states = thread_flush_states()
+    if any(state != cfg.flush_denormal for state in states):
+        print(f"warning: flush_denormal={str(cfg.flush_denormal).lower()} holds on {states.count(cfg.flush_denormal)} "
+              f"of {len(states)} torch threads of this machine; the run goes on", file=sys.stderr, flush=True)
+
+
 # --------------------------------------------------------------------------- run metadata
 def run_metadata(cfg: TrainConfig, state: RunState, command: str, threads: int, device: torch.device) -> dict:
     """The ``/run/meta`` message of this session (see :mod:`hersd.runlog`)."""
-    return {"run_id": config_hash(cfg), "config": asdict(cfg), "seed": cfg.seed, "versions": _versions(),
+    return {"run_id": config_hash(cfg), "config": config_record(cfg), "seed": cfg.seed, "versions": _versions(),
             "git_commit": _git_commit(), "command": command, "start_time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "resumed_from_epoch": state.epochs_done, "effective": state.effective_totals(),
             "threads": threads, "device": str(device), "machine": machine_info()}
