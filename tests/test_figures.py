@@ -1,0 +1,140 @@
+"""analysis/figures.py: what the figures draw (curves, bands, markers, legends) and that their labels stay
+inside them."""
+
+from __future__ import annotations
+
+import matplotlib.colors
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+from analysis import metrics
+from analysis.figures import LEGEND_CHARACTERS, mean_rate_figures, composition_figures, learning_curve_figures, mep_figures, q_figures
+from analysis.load import load_runs
+from analysis.report import main as report_main
+from analysis.synthetic import write_run
+from hersd.config import ScheduleConfig
+
+from analysis_logs import PUSH_STEPS, WINDOW, make_config, write_campaign_midway
+from analysis_logs import run_tables as _tables
+
+
+def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path):
+    write_campaign_midway(tmp_path)
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    (figure,) = learning_curve_figures(analysis)
+    assert "Thin dashed lines: runs still in progress" in figure.caption
+    linear_panel, exp_panel = figure.draw().axes
+    lines = {line.get_label(): line for line in linear_panel.get_lines()}
+    assert set(lines) == {"HER", "HER (in progress)", "linear b1=0.5", "linear b1=0.5 (in progress)"}
+    assert lines["HER (in progress)"].get_ydata().tolist() == [1.0] * 4  # the run's own moving average
+    assert lines["HER (in progress)"].get_linewidth() < lines["HER"].get_linewidth()
+    assert lines["HER (in progress)"].get_linestyle() == "--"
+    assert lines["HER"].get_ydata()[-1] == pytest.approx((0.8 + 2.6 / 3) / 2)  # the complete seeds' median
+    exp_lines = {line.get_label() for line in exp_panel.get_lines()}
+    assert exp_lines == {"HER", "HER (in progress)", "exp b1=0.5 b2=0.5 (in progress)"}  # drawn, and marked
+
+    assert report_main([str(tmp_path), "--out", str(tmp_path / "report"), "--smooth", str(WINDOW)]) == 0
+    runs = pd.read_csv(tmp_path / "report" / "tables" / "runs.csv").set_index("path")
+    assert runs.loc["her0/run.mcap", "state"] == "complete"
+    assert runs.loc["her2/run.mcap", "state"] == "in progress (epoch 4 of 6)"
+    # each run's own numbers, in progress too: her2 succeeds from its first epoch, linear2 never
+    assert runs.loc["her2/run.mcap", ["final", "epochs_to_0.9", "raw_epochs_to_0.9"]].tolist() == [1.0, 1, 1]
+    assert runs.loc["linear2/run.mcap", ["final", "epochs_to_0.5"]].fillna(-1).tolist() == [0.0, -1]
+    assert runs.loc["her0/run.mcap", ["final", "epochs_to_0.5", "raw_epochs_to_0.5"]].tolist() == [0.8, 5, 4]
+    page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
+    assert "in progress (epoch 3 of 6)" in page and "7 runs (3 in progress" in page
+
+
+def test_no_figure_without_its_data(hand_sized):
+    table = load_runs(hand_sized)
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    assert mep_figures(analysis) == []  # no MEP run
+    assert len(q_figures(analysis)) == 1
+    her_only = metrics.analyse(table.runs[table.runs["config"] == "HER"],
+                               table.epochs[table.epochs["config"] == "HER"], WINDOW)
+    assert q_figures(her_only) == []  # nothing to compare HER with
+
+
+@pytest.mark.parametrize("with_success", [False, True])
+def test_the_mean_rate_figure_names_the_marker_kinds_it_draws(tmp_path, with_success):
+    curve = np.linspace(0.0, 1.0, 6)
+    write_run(tmp_path / "her", make_config(), curve)
+    write_run(tmp_path / "linear", make_config(schedule=ScheduleConfig("linear", beta1=0.5)), curve)
+    if with_success:
+        write_run(tmp_path / "success", make_config(schedule=ScheduleConfig(kind="success", beta1=0.5)), curve)
+    table = load_runs(tmp_path)
+    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
+    labels = [text.get_text().replace("\n", " ") for text in figure.legends[0].get_texts()]
+    markers = [label for label in labels if label.startswith(("decay schedule", "success-driven"))]
+    assert markers == ["decay schedule (eq. 10 μ_ε)"] + (
+        ["success-driven rate (median over seeds of μ_ε)"] if with_success else [])
+    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
+    assert [len(collection.get_offsets()) for collection in drawn] == [1] * (1 + with_success)  # circles, diamonds
+
+
+def test_the_success_driven_rate_sits_at_the_median_of_its_complete_seeds_mean_rates(tmp_path):
+    """Each seed of a success-driven rate logs its own rates; the diamond sits at the median over
+    the complete seeds of each seed's mean rate, an unfinished seed left out."""
+    success = ScheduleConfig(kind="success", beta1=0.5, window=1)
+    curves = {0: [0.0] * 6, 1: [0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 2: [1.0] * 6}
+    for seed, curve in curves.items():
+        write_run(tmp_path / f"success{seed}", make_config(schedule=success, seed=seed), np.array(curve))
+    write_run(tmp_path / "success3", make_config(schedule=success, seed=3), np.ones(3), complete=False)
+    table = load_runs(tmp_path)
+    rates = table.runs.set_index("seed")["mu_eps"]
+    assert rates[0] > rates[1] > rates[2] and rates[3] < rates[1]  # the seeds' rates differ
+    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
+    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
+    assert [tuple(point) for point in drawn[0].get_offsets()] == [(0.5, pytest.approx(rates[1]))]
+
+
+def test_fig4_draws_the_median_of_50_epoch_averages_and_the_range_over_seeds(push_analysis):
+    (figure,) = learning_curve_figures(push_analysis)
+    assert figure.name == "curves_push_lr1_lh1" and "vs HER and HER eps=0.874375" in figure.title
+    axes = figure.draw().axes
+    assert len(axes) == 1 and axes[0].get_title() == "linear decay (β2 = 0)"
+    axis = axes[0]
+    lines = {line.get_label(): line for line in axis.get_lines()}
+    assert set(lines) == {"HER", "HER eps=0.874375", "linear b1=0.25"}
+    her = lines["HER"]
+    # Epoch 100: HER's seeds (steps 50, 60, 80) average 50/50, 40/50 and 20/50 over epochs 51..100.
+    assert her.get_xdata()[99] == 100 and her.get_ydata()[99] == pytest.approx(0.8)
+    band = next(c for c in axis.collections if np.allclose(c.get_facecolor()[0][:3], matplotlib.colors.to_rgb(
+        her.get_color())))
+    at_100 = band.get_paths()[0].vertices
+    assert sorted(set(np.round(at_100[at_100[:, 0] == 100][:, 1], 9))) == pytest.approx([0.4, 1.0])
+
+
+def test_fig10_draws_the_mean_q_over_seeds(push_analysis):
+    (figure,) = q_figures(push_analysis)
+    axis = figure.draw().axes[0]
+    her = next(line for line in axis.get_lines() if line.get_label() == "HER")
+    # Synthetic q_mean is -10 (1 - success) - 1: at epoch 70 two HER seeds succeed (-1), one not (-11).
+    assert her.get_ydata()[69] == pytest.approx(-13 / 3)
+    assert {line.get_label() for line in axis.get_lines()} == set(PUSH_STEPS)
+
+
+def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
+    for threshold in (None, 0.07):
+        for schedule in (ScheduleConfig(), ScheduleConfig("linear", beta1=0.25)):
+            config = make_config(schedule=schedule, epochs=6)
+            config.task.distance_threshold = threshold
+            write_run(tmp_path / f"{threshold}-{schedule.kind}", config, np.linspace(0, 1, 6))
+    analysis = metrics.analyse(*_tables(tmp_path), window=WINDOW)
+    assert "linear b1=0.25 (task.distance_threshold=0.07)" in set(analysis.runs["config"])
+    for report_figure in learning_curve_figures(analysis) + composition_figures(analysis):
+        figure = report_figure.draw()
+        canvas = FigureCanvasAgg(figure)  # what savefig draws on
+        canvas.draw()
+        renderer = canvas.get_renderer()
+        texts = [text for legend in figure.legends for text in legend.get_texts()]
+        texts += [axis.title for axis in figure.axes] + [figure._suptitle]
+        for text in texts:
+            box = text.get_window_extent(renderer)
+            assert 0 <= box.x0 and box.x1 <= figure.bbox.x1, (report_figure.name, text.get_text())
+        assert all(len(line) <= LEGEND_CHARACTERS for legend in figure.legends for text in legend.get_texts()
+                   for line in text.get_text().splitlines())
+        for axis in figure.axes:  # a panel title no wider than its panel and the gaps beside it
+            assert axis.title.get_window_extent(renderer).width <= 1.1 * axis.get_window_extent(renderer).width

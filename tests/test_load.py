@@ -1,0 +1,162 @@
+"""analysis/load.py: every run log under a folder -> runs and epochs tables; labels, identities, damaged,
+resumed and old logs, reading in worker processes."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis import load, metrics
+from analysis.figures import config_styles
+from analysis.load import config_label, load_runs
+from analysis.report import main as report_main
+from analysis.synthetic import epoch_records, write_run
+from hersd.config import ScheduleConfig
+from hersd.runlog import RunLogWriter, read_run
+from hersd.runstore import config_hash
+
+from analysis_logs import WINDOW, make_config
+
+
+def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
+    table = load_runs(hand_sized)
+    assert len(table.runs) == 7 and len(table.epochs) == 42
+    assert not table.skipped
+    row = table.epochs[(table.epochs["config"] == "linear b1=0.5") & (table.epochs["epoch"] == 6)].iloc[0]
+    assert (row["task"], row["schedule"], row["beta1"], row["total_epochs"], row["complete"]) == ("push", "linear", 0.5, 6, True)
+    assert row["relabel_rate"] == pytest.approx(0.5)
+    assert row["mu_eps"] == pytest.approx(1 - 0.5 * 21 / 36)
+
+
+@pytest.mark.parametrize("settings, label", [
+    (("constant", 0.8, 0, 0, 1.0, 1.0, False), "HER"),
+    (("constant", 0.8, 0, 0, 1.0, 0.5, False), "ARCHER"),
+    (("constant", 0.8, 0, 0, 1.0, 1.0, True), "HER-MEP"),
+    (("constant", 0.9, 0, 0, 1.0, 1.0, False), "HER eps=0.9"),
+    (("linear", 0.8, 0.25, 0, 1.0, 1.0, False), "linear b1=0.25"),
+    (("exponential", 0.8, 0.5, -0.5, 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
+    (("linear", 0.8, 0.5, 0, 1.0, 1.0, True), "linear b1=0.5-MEP"),
+])
+def test_config_labels(settings, label):
+    assert config_label(*settings) == label
+
+
+def test_the_run_list_names_the_cpu_a_log_records(tmp_path):
+    write_run(tmp_path / "new", make_config(), np.zeros(6), meta={"machine": {"cpu_model": "AMD EPYC", "cpu_cores": 2}})
+    write_run(tmp_path / "old", make_config(seed=1), np.zeros(6))  # a log from before the machine was recorded
+    assert load_runs(tmp_path).runs.set_index("path")["cpu"].to_dict() == {"new/run.mcap": "AMD EPYC",
+                                                                           "old/run.mcap": ""}
+
+
+def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
+    write_run(tmp_path / "a", make_config(epochs=4), np.zeros(4))
+    write_run(tmp_path / "b", make_config(epochs=6), np.zeros(6))
+    write_run(tmp_path / "c", make_config(seed=1, epochs=6), np.zeros(6))
+    labels = load_runs(tmp_path).runs.groupby("config", observed=True)["seed"].apply(list).to_dict()
+    assert labels == {"HER (epochs=4)": [0], "HER (epochs=6)": [0, 1]}
+
+
+def test_a_log_made_before_fields_existed_shares_the_configuration_of_new_logs(tmp_path):
+    write_run(tmp_path / "new", make_config(seed=1), np.zeros(6))
+    config = dataclasses.asdict(make_config())
+    for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
+        del config[key]
+    for key in ("window", "eps_min"):
+        del config["schedule"][key]
+    (tmp_path / "old").mkdir()
+    writer = RunLogWriter(tmp_path / "old" / "run.mcap", {
+        "run_id": config_hash(config), "config": config, "seed": 0, "versions": {}, "command": "old",
+        "start_time": "2024-01-01T00:00:00+0000", "resumed_from_epoch": 0})
+    for record in epoch_records(make_config(), np.zeros(6)):
+        writer.write_epoch(record)
+    writer.finish(6)
+    assert config_hash(config) == config_hash(make_config())
+    assert list(load_runs(tmp_path).runs["config"]) == ["HER", "HER"]
+
+
+def test_a_label_spans_tasks_with_different_budgets_and_lookalikes_get_distinct_styles(tmp_path):
+    write_run(tmp_path / "reach", make_config(task="reach", epochs=4), np.zeros(4))
+    write_run(tmp_path / "push20", make_config(epochs=20), np.zeros(20))
+    write_run(tmp_path / "push30", make_config(epochs=30), np.zeros(30))
+    table = load_runs(tmp_path)
+    labels = table.runs.groupby(["task", "config"], observed=True)["run"].count().to_dict()
+    assert labels == {("reach", "HER"): 1, ("push", "HER (epochs=20)"): 1, ("push", "HER (epochs=30)"): 1}
+    styles = config_styles(metrics.analyse(table.runs, table.epochs, WINDOW))
+    looks = {(style["color"], str(style["linestyle"])) for style in styles.values()}
+    assert len(looks) == len(styles) == 3
+
+
+def _truncate_inside_epoch(path: Path, epoch: int) -> None:
+    """Cut the file in the middle of the given epoch's message, as a killed writer leaves it."""
+    data = path.read_bytes()
+    cut = data.index(b'{"epoch": %d,' % epoch) + 8
+    path.write_bytes(data[:cut])
+
+
+def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, capsys):
+    path = write_run(tmp_path / "cut", make_config(), np.linspace(0, 1, 6))
+    _truncate_inside_epoch(path, 4)
+    (tmp_path / "garbage").mkdir()
+    (tmp_path / "garbage" / "run.mcap").write_bytes(b"not an mcap file" * 10)
+    table = load_runs(tmp_path)
+    run = table.runs.iloc[0]
+    assert (run["epochs_done"], run["complete"], run["damaged"]) == (3, False, True)
+    assert table.epochs["epoch"].tolist() == [1, 2, 3]
+    assert table.epochs["test_success"].tolist() == pytest.approx([0.0, 0.2, 0.4])
+    assert table.skipped == ["garbage/run.mcap: not a hersd run log (no run metadata found)"]
+
+    assert report_main([str(tmp_path), "--smooth", "2"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["warning: skipped unreadable log garbage/run.mcap: not a hersd run log (no run metadata found)"]
+
+
+def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
+    """Each completed epoch counts once: a truncated log up to its damage, a resumed run's
+    rewritten epoch with its later value."""
+    config = make_config(epochs=6)
+    write_run(tmp_path / "complete", config, np.linspace(0, 1, 6))
+    truncated = write_run(tmp_path / "truncated", config, np.linspace(0, 1, 6))
+    _truncate_inside_epoch(truncated, 5)
+    resumed = write_run(tmp_path / "resumed", config, np.linspace(0, 0.5, 4), complete=False)
+    previous = read_run(resumed)
+    writer = RunLogWriter(resumed, {**previous.meta, "resumed_from_epoch": 3}, previous=previous)
+    for record in epoch_records(config, np.linspace(0.1, 1.0, 6))[3:]:  # epoch 4 again, then 5 and 6
+        writer.write_epoch(record)
+    writer.finish(6)
+    table = load_runs(tmp_path)
+    runs = table.runs.set_index(table.runs["path"].str.split("/").str[0])
+    assert runs.loc[["complete", "truncated", "resumed"], ["epochs_done", "complete", "damaged"]].values.tolist() == [
+        [6, True, False], [4, False, True], [6, True, False]]
+    resumed_epochs = table.epochs[table.epochs["path"] == "resumed/run.mcap"]
+    assert resumed_epochs["epoch"].tolist() == [1, 2, 3, 4, 5, 6]
+    assert resumed_epochs["test_success"].iloc[3] == pytest.approx(0.64)  # the rewrite, not 0.5
+
+
+def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_mean_rate(tmp_path):
+    from hersd.config import LearnerConfig
+
+    curve = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    write_run(tmp_path / "ddpg", make_config(), curve)
+    td3 = make_config()
+    td3.learner = LearnerConfig(name="td3")
+    write_run(tmp_path / "td3", td3, curve)
+    success = make_config(schedule=ScheduleConfig(kind="success", beta1=0.5, window=1))
+    write_run(tmp_path / "success", success, curve)
+    runs = load_runs(tmp_path).runs.set_index("config")
+    assert list(runs.index) == ["HER", "success b1=0.5", "TD3 HER"]  # DDPG first, schedules in their order
+    assert runs.loc["TD3 HER", "learner"] == "td3" and runs.loc["HER", "learner"] == "ddpg"
+    logged = read_run(tmp_path / "success" / "run.mcap").epochs["relabel_rate"]
+    assert list(logged) == pytest.approx([1.0, 1.0, 0.91, 0.82, 0.73, 0.64])  # 1 - 0.5 * last epoch's train success
+    assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())
+
+
+def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch):
+    here = load_runs(sweep)  # 32 logs: fewer than load.PARALLEL_FROM, read in this process
+    monkeypatch.setattr(load, "PARALLEL_FROM", 2)
+    forked = load_runs(sweep)
+    pd.testing.assert_frame_equal(forked.runs, here.runs)
+    pd.testing.assert_frame_equal(forked.epochs, here.epochs)

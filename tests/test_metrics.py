@@ -1,0 +1,252 @@
+"""analysis/metrics.py: smoothing, medians, outcomes, IQM and its bootstrap, probability of improvement,
+permutation tests, against hand-computed values on synthetic logs (tests/analysis_logs.py)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from fractions import Fraction
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis import metrics
+from analysis.load import load_runs
+from analysis.synthetic import write_run
+from hersd.config import ScheduleConfig, TrainConfig
+
+from analysis_logs import HER_MEDIAN, PUSH_EPOCHS, PUSH_STEPS, WINDOW, make_config, write_campaign_midway
+from analysis_logs import run_tables as _tables
+
+
+@pytest.fixture(scope="module")
+def analysed(hand_sized) -> metrics.Analysis:
+    table = load_runs(hand_sized)
+    return metrics.analyse(table.runs, table.epochs, WINDOW)
+
+
+def test_smoothed_median_curve_and_range_equal_hand_values(analysed):
+    her = analysed.medians[analysed.medians["config"] == "HER"]
+    assert her["epoch"].tolist() == [1, 2, 3, 4, 5, 6]
+    assert her["median"].to_numpy() == pytest.approx(HER_MEDIAN)
+    assert her["low"].tolist()[-1] == pytest.approx(0.4)
+    assert her["high"].tolist()[-1] == pytest.approx(1.0)
+    assert her["n_seeds"].tolist() == [5] * 6
+    seed1 = analysed.curves[(analysed.curves["config"] == "HER") & (analysed.curves["seed"] == 1)]
+    assert seed1["smoothed"].to_numpy() == pytest.approx([0.0, 0.15, 0.3, 1.6 / 3, 2.2 / 3, 2.6 / 3])
+
+
+def test_summary_row_equals_hand_values(analysed):
+    her = analysed.summary[analysed.summary["config"] == "HER"].iloc[0]
+    assert her["seeds"] == 5 and her["in_progress"] == 0
+    assert her["final_median"] == pytest.approx(0.8)
+    assert her["auc"] == pytest.approx(sum(HER_MEDIAN) / 6)  # (0 + .15 + .3 + .5333 + .6 + .8) / 6 = 0.39722
+    assert her["auc"] == pytest.approx(0.397222, abs=1e-6)
+    assert her["epochs_to_0.5"] == 4
+    assert pd.isna(her["epochs_to_0.9"])  # never reached: an empty cell
+    # raw medians per epoch: 0, 0.3, 0.6, 0.6, 0.9, 0.9 -> 0.5 first at epoch 3, 0.9 at epoch 5
+    assert her["raw_epochs_to_0.5"] == 3 and her["raw_epochs_to_0.9"] == 5
+    assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)  # drop 0.4 and 1.0
+    assert her["iqm_low"] <= her["iqm"] <= her["iqm_high"]
+    assert her["p_improve_HER"] == pytest.approx(0.5)
+    linear = analysed.summary[analysed.summary["config"] == "linear b1=0.5"].iloc[0]
+    assert linear["final_median"] == pytest.approx(0.575)
+    assert linear["epochs_to_0.5"] == 1
+    # 0.95 beats four of the five HER finals (not 1.0); 0.2 beats none.
+    assert linear["p_improve_HER"] == pytest.approx(4 / 10)
+
+
+def test_each_runs_own_outcomes_equal_hand_values(analysed):
+    """Seeds 0, 1 and 3 of HER_SUCCESS: the smoothed values by hand in its comments, the raw ones as written."""
+    outcomes = analysed.outcomes.merge(analysed.runs[["run", "config", "seed"]], on="run")
+    her = outcomes[outcomes["config"] == "HER"].set_index("seed")
+    columns = ["final", "epochs_to_0.5", "epochs_to_0.9", "raw_epochs_to_0.5", "raw_epochs_to_0.9"]
+    assert her.loc[0, columns].tolist() == [pytest.approx(0.8), 5, pd.NA, 4, 5]
+    assert her.loc[1, columns].tolist() == [pytest.approx(2.6 / 3), 4, pd.NA, 3, 5]
+    assert her.loc[3, columns].tolist() == [pytest.approx(1.0), 3, 5, 2, 3]
+    assert len(outcomes) == len(analysed.runs)
+
+
+def test_runs_in_progress_enter_no_statistic(tmp_path):
+    """Every table, median and mean equals that of the complete runs alone (a test that fails if an
+    unfinished run counted anywhere: each would move the numbers)."""
+    write_campaign_midway(tmp_path / "complete", in_progress=False)
+    write_campaign_midway(tmp_path / "midway")
+    alone, midway = (metrics.analyse(*_tables(tmp_path / name), WINDOW) for name in ("complete", "midway"))
+    assert set(midway.curves.loc[~midway.curves["complete"], "config"]) == {"HER", "linear b1=0.5",
+                                                                          "exp b1=0.5 b2=0.5"}
+    summary = midway.summary.set_index("config")
+    assert list(summary.index) == ["HER", "linear b1=0.5"]  # exp has no complete run: no row
+    assert summary["seeds"].tolist() == [2, 2] and summary["in_progress"].tolist() == [1, 1]
+    assert summary.loc["HER", "final_median"] == pytest.approx((0.8 + 2.6 / 3) / 2)  # seeds 0 and 1 at epoch 6
+    assert summary.loc["linear b1=0.5", "p_improve_HER"] == pytest.approx(2 / 4)  # 0.95 beats both, 0.2 neither
+    assert list(midway.aggregate["config"]) == ["HER", "linear b1=0.5"]
+    assert midway.tests[["config", "versus", "seeds", "versus_seeds"]].values.tolist() == [
+        ["HER", "linear b1=0.5", 2, 2], ["linear b1=0.5", "HER", 2, 2]]
+    for name in ("summary", "aggregate", "medians", "shares", "q_means", "tests"):
+        pd.testing.assert_frame_equal(_comparable(getattr(midway, name)), _comparable(getattr(alone, name)))
+    assert (midway.medians["n_seeds"] == 2).all()
+
+
+def _comparable(table: pd.DataFrame) -> pd.DataFrame:
+    """A table without what names the runs left out (their count, the categories of their labels)."""
+    return table.drop(columns="in_progress", errors="ignore").astype({"config": str}, errors="ignore")
+
+
+def test_probability_of_improvement_counts_ties_half():
+    assert metrics.probability_of_improvement(np.array([0.5, 0.8]), np.array([0.5, 0.4, 0.9])) == pytest.approx(3.5 / 6)
+
+
+def test_first_epoch_reaching_is_nan_when_never_reached():
+    epochs = np.array([1, 2, 3])
+    assert metrics.first_epoch_reaching(epochs, np.array([0.1, 0.5, 0.7]), 0.5) == 2
+    assert math.isnan(metrics.first_epoch_reaching(epochs, np.array([0.1, 0.2, 0.3]), 0.5))
+
+
+def test_a_smoothed_window_of_exactly_half_successes_reaches_half_at_that_epoch():
+    """The first 75 test successes of a FetchPush log (linear 0.25, seed 1) in twentieths (20 test
+    episodes): those of epochs 26-75 add up to 25.0, so the 50-epoch mean first reaches 0.5 at epoch 75
+    (pandas' running sum alone gives 0.49999999999999994 there, and epoch 76)."""
+    twentieths = [1, 3, 3, 2, 0, 1, 1, 0, 0, 2, 2, 1, 2, 2, 2, 1, 2, 0, 0, 1, 1, 0, 4, 1, 3, 1, 4, 2, 2, 1, 1,
+                  3, 6, 1, 3, 2, 3, 4, 1, 5, 3, 3, 7, 5, 7, 6, 8, 7, 8, 11, 11, 10, 10, 13, 12, 15, 14, 15,
+                  13, 19, 17, 17, 15, 19, 18, 18, 17, 17, 17, 19, 18, 19, 18, 17, 18]
+    epochs = pd.DataFrame({"task": "push", "config": "linear b1=0.25", "run": 0, "seed": 1, "complete": False,
+                           "epoch": np.arange(1, 76), "test_success": np.array(twentieths) / 20})
+    curve = metrics.smoothed_curves(epochs, window=50)
+    assert sum(twentieths[25:]) == 500 and curve["smoothed"].iloc[-1] == 0.5
+    assert metrics.first_epoch_reaching(curve["epoch"].to_numpy(), curve["smoothed"].to_numpy(), 0.5) == 75
+
+
+def test_bootstrap_interval_is_seeded_and_stratified():
+    values = [np.random.default_rng(7).uniform(size=12)]
+    first = metrics.iqm_interval(values, seed=3)
+    assert metrics.iqm_interval(values, seed=3) == first
+    assert metrics.iqm_interval(values, seed=4) != first
+    assert first[0] < metrics.interquartile_mean(values[0]) < first[1]
+    # Resampling within each task keeps three 0s and three 1s in every pooled sample: IQM always 0.5.
+    # Pooling the tasks before resampling would spread the interval.
+    assert metrics.iqm_interval([np.zeros(3), np.ones(3)]) == (0.5, 0.5)
+    # A task with one seed cannot be resampled and is held fixed.
+    low, high = metrics.iqm_interval([np.array([0.2, 0.4]), np.array([1.0])])
+    assert 0.2 <= low <= high <= 1.0
+    assert all(math.isnan(bound) for bound in metrics.iqm_interval([np.array([0.3])]))
+
+
+def test_aggregate_pools_tasks(analysed):
+    her = analysed.aggregate[analysed.aggregate["config"] == "HER"].iloc[0]
+    assert her["tasks"] == 1 and her["seeds"] == 5
+    assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)
+
+
+def test_mean_rate_lines_use_eq10_and_eq11():
+    lines = metrics.mean_rate_lines([0.0], total_epochs=4, points=3)  # beta1 = 0, 0.5, 1
+    assert lines["exact"].tolist() == pytest.approx([1.0, 1 - 0.5 * (1 + 2 + 3 + 4) / 16, 1 - 10 / 16])
+    assert lines["approx"].tolist() == pytest.approx([1.0, 0.75, 0.5])
+
+
+def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
+    """A folder holding HER at K = 6 and K = 8 (labels "HER (epochs=6)", "HER (epochs=8)") and TD3
+    runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""
+    from hersd.config import LearnerConfig
+
+    def td3(config: TrainConfig) -> TrainConfig:
+        config.learner = LearnerConfig(name="td3")
+        return config
+
+    linear = ScheduleConfig("linear", beta1=0.5)
+    finals = {"her6": 0.4, "her8": 1.0, "linear6": 0.8, "td3_her6": 1.0, "td3_linear6": 0.8}
+    configs = {"her6": make_config(), "her8": make_config(epochs=8), "linear6": make_config(schedule=linear),
+               "td3_her6": td3(make_config()), "td3_linear6": td3(make_config(schedule=linear))}
+    for name, config in configs.items():
+        write_run(tmp_path / name, config, np.full(config.epochs, finals[name]))
+    table = load_runs(tmp_path)
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    p_improve = analysis.summary.set_index("config")["p_improve_HER"]
+    assert p_improve["linear b1=0.5"] == 1.0  # 0.8 beats HER at K = 6 (0.4), not HER at K = 8 (1.0)
+    assert p_improve["TD3 linear b1=0.5"] == 0.0  # TD3's HER (1.0), not DDPG's
+    assert p_improve["HER (epochs=8)"] == 0.5 and p_improve["TD3 HER"] == 0.5
+    assert analysis.aggregate.set_index("config")["p_improve_HER"]["linear b1=0.5"] == 1.0
+
+
+def test_push_summary_equals_hand_values(push_analysis):
+    summary = push_analysis.summary.set_index("config")
+    # The median seed's average reaches 0.5 at epoch step + 25: HER's (60) at 85, the linear's (50) at 75.
+    assert summary.loc["HER", "epochs_to_0.5"] == 85 and summary.loc["linear b1=0.25", "epochs_to_0.5"] == 75
+    # Final (epoch 150) averages: HER 1, 1, 1; linear 1, 1, 0.6 (step at 120: 30 of 50 epochs).
+    assert summary.loc["linear b1=0.25", "final_median"] == pytest.approx(1.0)
+    assert summary.loc["linear b1=0.25", "iqm"] == pytest.approx(stats_trim_mean([1.0, 1.0, 0.6]))
+    assert summary.loc["linear b1=0.25", "p_improve_HER"] == pytest.approx(3 / 9)  # 6 ties of 9 pairs
+    her_median = np.median([[min(max(k - step, 0), 50) / 50 for k in range(1, 151)] for step in PUSH_STEPS["HER"]],
+                           axis=0)
+    assert summary.loc["HER", "auc"] == pytest.approx(her_median.mean())
+
+
+def stats_trim_mean(values: list[float]) -> float:
+    """IQM by hand: drop floor(n / 4) values at each end, average the rest."""
+    cut = len(values) // 4
+    return float(np.mean(sorted(values)[cut:len(values) - cut]))
+
+
+def test_permutation_tests_equal_an_enumeration_of_every_split_of_the_seeds(push_analysis):
+    """Every ordered pair of the three configurations (3 seeds each: 20 splits), each outcome: the share of
+    splits whose difference of means is at least the observed one, "better" meaning higher final success
+    and fewer epochs, a seed that never reaches a threshold counted as K + 1 = 151 epochs."""
+    outcomes = push_analysis.outcomes.merge(push_analysis.runs[["run", "config"]], on="run")
+    columns = ["final", "epochs_to_0.5", "epochs_to_0.9", "raw_epochs_to_0.5", "raw_epochs_to_0.9"]
+    signed = {config: np.array([[value if column == "final" else -(PUSH_EPOCHS + 1 if pd.isna(value) else value)
+                                 for value in group[column]] for column in columns])
+              for config, group in outcomes.groupby("config", observed=True)}
+    tests = push_analysis.tests.astype({"config": str, "versus": str}).set_index(["config", "versus"])
+    assert len(tests) == 6
+    for (config, versus), row in tests.iterrows():
+        x, y = signed[config], signed[versus]
+        pooled = np.concatenate([x, y], axis=1)
+        splits = [np.isin(np.arange(6), chosen) for chosen in itertools.combinations(range(6), x.shape[1])]
+        observed = x.mean(axis=1) - y.mean(axis=1)
+        differences = np.array([pooled[:, chosen].mean(axis=1) - pooled[:, ~chosen].mean(axis=1) for chosen in splits])
+        expected = (differences >= observed - 1e-9).mean(axis=0)
+        assert row[[f"p_{column}" for column in columns]].tolist() == pytest.approx(expected.tolist()), (config, versus)
+    # By hand: the control's raw 0.5 at epochs 46, 56, 71 against HER's 51, 61, 81; of the 20 ways to
+    # pick three of the six, 6 sum to at most 46 + 56 + 71 = 173.
+    assert tests.loc[("HER eps=0.874375", "HER"), "p_raw_epochs_to_0.5"] == pytest.approx(6 / 20)
+    # Every seed of HER reaches 0.9 on its smoothed curve; none of linear's third (step 120): the
+    # "never" (151) makes linear worse, not absent.
+    assert tests.loc[("HER", "linear b1=0.25"), "p_epochs_to_0.9"] < tests.loc[("linear b1=0.25", "HER"),
+                                                                              "p_epochs_to_0.9"]
+
+
+def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and_k(tmp_path):
+    """HER and linear at K = 6 (two seeds each), HER at K = 8 (two seeds), linear at K = 8 (one seed):
+    only the two K = 6 configurations are tested, against each other."""
+    linear = ScheduleConfig("linear", beta1=0.5)
+    for seed in (0, 1):
+        write_run(tmp_path / f"her6-{seed}", make_config(seed=seed), np.full(6, 0.2 + 0.1 * seed))
+        write_run(tmp_path / f"linear6-{seed}", make_config(schedule=linear, seed=seed), np.full(6, 0.9))
+        write_run(tmp_path / f"her8-{seed}", make_config(seed=seed, epochs=8), np.full(8, 1.0))
+    write_run(tmp_path / "linear8", make_config(schedule=linear, epochs=8), np.full(8, 0.9))
+    tests = metrics.analyse(*_tables(tmp_path), WINDOW).tests.set_index(["config", "versus"])
+    assert list(tests.index) == [("HER (epochs=6)", "linear b1=0.5 (epochs=6)"),
+                                 ("linear b1=0.5 (epochs=6)", "HER (epochs=6)")]
+    # 0.9, 0.9 against 0.2, 0.3: of the 6 splits only the observed one is as favourable.
+    assert tests.loc[("linear b1=0.5 (epochs=6)", "HER (epochs=6)"), "p_final"] == pytest.approx(1 / 6)
+    assert tests.loc[("HER (epochs=6)", "linear b1=0.5 (epochs=6)"), "p_final"] == pytest.approx(1.0)
+
+
+def test_permutation_tests_keep_sides_with_equal_means_tied():
+    """HER and linear with the same four final successes in another seed order: each side's p for doing
+    better is the exact share of the 70 splits whose difference of means is >= 0, counted in fractions
+    (float sums in another order differ by ~1e-17, which would break the ties)."""
+    finals = ["0.69", "0.32", "0.61", "0.8"]
+    linear_order = [2, 0, 3, 1]
+    runs = pd.DataFrame({"task": "push", "run": [f"r{i}" for i in range(8)], "learner": "ddpg", "total_epochs": 6,
+                         "complete": True, "config": pd.Categorical(["HER"] * 4 + ["linear b1=0.5"] * 4)})
+    values = [float(finals[i]) for i in range(4)] + [float(finals[i]) for i in linear_order]
+    outcomes = pd.DataFrame({"run": runs["run"], "final": values, **{column: pd.array([3] * 8, dtype="Int64")
+                             for column in metrics.RUN_OUTCOME_COLUMNS[1:]}})
+    pooled = [Fraction(value) for value in finals * 2]
+    splits = list(itertools.combinations(range(8), 4))
+    at_least_tied = sum(sum(pooled[i] for i in chosen) >= sum(pooled[:4]) for chosen in splits)
+    tests = metrics.permutation_tests(runs, outcomes)
+    assert tests["p_final"].tolist() == [pytest.approx(at_least_tied / 70)] * 2
+    assert tests["p_epochs_to_0.5"].tolist() == [1.0, 1.0]  # every seed at epoch 3: every split ties

@@ -1,0 +1,166 @@
+"""analysis/report.py: the hersd-report command, its errors, files and page, without torch, MuJoCo or the
+sweeps layer; the composition table; the study storages it draws."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analysis import metrics
+from analysis.figures import composition_figures
+from analysis.report import main as report_main
+from analysis.synthetic import write_run
+
+from analysis_logs import make_config, write_campaign_midway
+from analysis_logs import run_tables as _tables
+
+
+def test_empty_folder_is_one_line_error_exit_2(tmp_path, capsys):
+    assert exit_status([str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no run.mcap files under" in err
+
+
+def exit_status(arguments: list[str]) -> int:
+    """hersd-report's exit status, whether main returns it or argparse exits with it."""
+    try:
+        return report_main(arguments)
+    except SystemExit as exited:
+        return exited.code
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["--smooth", "0"], "--smooth must be at least 1"),
+    (["--task", "reach"], "no run matches the filters"),
+    (["--format", "gif"], "invalid choice"),
+])
+def test_bad_options_are_one_line_errors(hand_sized, capsys, tmp_path, arguments, message):
+    assert exit_status([str(hand_sized), "--out", str(tmp_path), *arguments]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+
+
+def test_report_writes_tables_figures_and_self_contained_html(sweep, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert report_main([str(sweep), "--out", str(out), "--smooth", "3"]) == 0
+    printed = capsys.readouterr().out
+    assert "loaded 32 runs (0 incomplete, 0 skipped)" in printed and str(out / "index.html") in printed
+    figures = sorted(path.stem for path in (out / "figures").glob("*.png"))
+    assert figures == sorted(["schedules", "composition_push", "composition_slide", "curves_push_lr1_lh1",
+                              "curves_push_lr1_lh0.5", "curves_slide_lr1_lh1", "curves_slide_lr1_lh0.5", "q_mean",
+                              "mep", "mean_rate_push", "mean_rate_slide"])
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert page.count("data:image/png;base64,") == len(figures)
+    assert "<img" in page and 'src="figures/' not in page
+    summary = pd.read_csv(out / "tables" / "summary.csv")
+    assert len(summary) == 2 * 8 and set(summary["seeds"]) == {2}
+    assert (out / "tables" / "summary.md").read_text(encoding="utf-8").startswith("| task | config |")
+    runs = pd.read_csv(out / "tables" / "runs.csv")
+    assert len(runs) == 32 and page.count("run.mcap") >= 32
+    tests = pd.read_csv(out / "tables" / "permutation_tests.csv")
+    assert len(tests) == 2 * 8 * 7  # per task, every ordered pair of its 8 configurations
+    assert "112 tests: too many for this page; they are in tables/permutation_tests.md" in page
+
+
+def test_the_report_page_shows_a_short_list_of_permutation_tests(tmp_path):
+    write_campaign_midway(tmp_path / "logs")
+    assert report_main([str(tmp_path / "logs"), "--out", str(tmp_path / "report")]) == 0
+    page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
+    assert "<h2>Permutation tests between configurations</h2>" in page and "<th>p: higher final success</th>" in page
+    tests = (tmp_path / "report" / "tables" / "permutation_tests.md").read_text(encoding="utf-8")
+    assert tests.splitlines()[2].startswith("| push | HER | linear b1=0.5 | 2 | 2 |")
+
+
+def test_report_filters_and_svg(sweep, tmp_path):
+    out = tmp_path / "svg"
+    assert report_main([str(sweep), "--out", str(out), "--task", "slide", "--algo", "her", "--format", "svg"]) == 0
+    assert {path.suffix for path in (out / "figures").iterdir()} == {".svg"}
+    summary = pd.read_csv(out / "tables" / "summary.csv")
+    assert set(summary["task"]) == {"slide"}
+    assert not summary["config"].str.contains("λh").any() and "ARCHER" not in set(summary["config"])
+    assert "data:image/svg+xml;base64," in (out / "index.html").read_text(encoding="utf-8")
+
+
+def test_report_runs_without_torch_mujoco_or_the_sweeps_layer(sweep, tmp_path):
+    # A finder that refuses these packages, in this process and in the report's forked workers:
+    # importing one anywhere fails the report. (Setting sys.modules['torch'] = None would also
+    # block the import, but scipy's array-API helpers then trip over the None entry.)
+    script = (
+        "import sys\n"
+        "BLOCKED = ('torch', 'mujoco', 'gymnasium_robotics', 'gymnasium', 'sweeps')\n"
+        "class Refuse:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] in BLOCKED:\n"
+        "            raise ImportError(f'{name} is blocked in this test')\n"
+        "sys.meta_path.insert(0, Refuse())\n"
+        "import analysis.report\n"
+        f"sys.exit(analysis.report.main([{str(sweep)!r}, '--out', {str(tmp_path / 'out')!r}, '--task', 'push']))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert len(list((tmp_path / "out" / "figures").glob("*.png"))) == 7  # drawn in forked workers too
+
+
+def test_importing_the_report_loads_neither_the_sweeps_layer_nor_heavy_modules():
+    code = ("import sys, analysis, analysis.report\n"
+            "print(sorted(m for m in ('sweeps', 'torch', 'mujoco', 'optuna', 'matplotlib', 'scipy.stats') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"  # optuna, matplotlib and scipy.stats come only when drawing or computing
+
+
+def test_composition_at_epoch_150_beside_the_papers(push_paper, tmp_path):
+    out = tmp_path / "report"
+    assert report_main([str(push_paper), "--out", str(out)]) == 0
+    table = pd.read_csv(out / "tables" / "composition_150.csv")
+    assert list(table.columns) == ["source", "config", "seeds", "epoch", "share_real_success", "share_hindsight",
+                                   "share_real_failure"]
+    paper, ours = table.to_dict("records")
+    assert (paper["source"], paper["config"], paper["epoch"]) == ("paper (Fig. 2)", "HER", 150)
+    assert [paper[c] for c in table.columns[4:]] == pytest.approx([0.053, 0.80, 0.147])
+    assert (ours["source"], ours["config"], ours["seeds"], ours["epoch"]) == ("hersd", "HER", 3, 150)
+    assert [ours[c] for c in table.columns[4:]] == pytest.approx([0.06, 0.80, 0.14])  # medians of HER_SHARES_150
+    page = (out / "index.html").read_text(encoding="utf-8")
+    figure_at, table_at = page.index('id="composition_push"'), page.index("epoch 150: hersd vs paper")
+    assert figure_at < table_at < page.index("<figure", figure_at + 1)  # right after its figure
+    (composition,) = composition_figures(metrics.analyse(*_tables(push_paper), window=50))
+    her_panel = composition.draw().axes[0]
+    assert her_panel.get_title() == "HER" and [150, 150] in [list(line.get_xdata()) for line in her_panel.get_lines()]
+
+
+def test_no_composition_table_without_her_runs_that_reached_epoch_150(push_paper, sweep, tmp_path):
+    assert report_main([str(sweep), "--out", str(tmp_path / "short"), "--task", "push"]) == 0  # 8 epochs
+    assert not (tmp_path / "short" / "tables" / "composition_150.csv").exists()
+    runs, epochs = _tables(push_paper)
+    others = metrics.analyse(runs[runs["config"] != "HER"], epochs[epochs["config"] != "HER"], window=50)
+    assert others.composition_vs_paper.empty  # the constant control (eps 0.874375) is not HER
+
+
+def test_given_storages_are_drawn(hand_sized, storages, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert report_main([str(hand_sized), "--out", str(out), "--storage", f"sqlite:///{storages / 'study.db'}",
+                        "--storage", f"journal:{storages / 'study.log'}"]) == 0
+    assert sorted(path.name for path in (out / "search").iterdir()) == sorted(
+        f"{name}_{suffix}" for name in ("in_sqlite", "in_journal")
+        for suffix in ("beta_plane.png", "best_trials.csv", "best_trials.md"))
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "Optuna searches" in page and "Best trials: in_journal" in page and "Best trials: in_sqlite" in page
+    assert capsys.readouterr().err == ""
+
+
+def test_storages_in_the_search_folder_are_found_and_a_bad_one_is_skipped(storages, tmp_path, capsys):
+    write_run(tmp_path / "run", make_config(), np.linspace(0, 1, 6))
+    (tmp_path / "search").mkdir()
+    for name in ("study.db", "study.log", "plain.db"):
+        (tmp_path / "search" / name).write_bytes((storages / name).read_bytes())
+    assert report_main([str(tmp_path), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    plain = tmp_path / "search" / "plain.db"
+    assert err == [f"warning: skipped study storage {plain}: no Optuna study in this storage"]
+    assert {path.name for path in (tmp_path / "out" / "search").glob("*.png")} == {
+        "in_sqlite_beta_plane.png", "in_journal_beta_plane.png"}
+    assert "study storage" in (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
