@@ -39,9 +39,9 @@ from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from analysis.studies import StudyStorage, open_study_storage
 from hersd.study import StudyStorageError, find_study_storages
-from analysis.tables import html_table, markdown_table
+from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.workers import ForkedMap
-from hersd.tasks import task_title
+from hersd.tasks import task_rank, task_title
 
 if TYPE_CHECKING:
     from analysis.figures import ReportFigure
@@ -56,37 +56,47 @@ MIME = {"png": "image/png", "svg": "image/svg+xml"}
 PAGE_TEST_ROWS = 60  # more permutation tests than this stay in their table files
 RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", *RUN_OUTCOME_COLUMNS,
                     "cpu", "damaged", "run_id"]
+# the page's run list, one table per task x configuration (its <details> summary names them)
+RUN_PAGE_COLUMNS = ["run_folder", "seed", "state", *RUN_OUTCOME_COLUMNS, "seconds_per_epoch", "cpu"]
 TABLE_NOTES = {
     "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
-                "other table: <b>seeds</b> counts them, <b>in_progress</b> the runs left out (not complete: "
-                "running or stopped; they are drawn on their own in the learning curves). "
-                "<b>final_median</b>: median over seeds of each seed's smoothed success at its last epoch K. "
-                "<b>auc</b>: mean over epochs 1..K of the median smoothed curve (area under it, normalised to "
-                "[0, 1]). "
-                "<b>epochs_to_0.5 / 0.9</b>: first epoch the median smoothed curve reaches 0.5 / 0.9 (empty: never); "
-                "<b>raw_epochs_to_0.5 / 0.9</b>: the same for the median of the raw test success. "
-                "<b>iqm</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
-                "interval [iqm_low, iqm_high] (seeded, 2000 resamples). <b>p_improve_HER</b>: P(X &gt; Y) + "
+                "other table: <b>complete seeds</b> counts them, <b>runs in progress</b> the runs left out (not "
+                "complete: running or stopped; they are drawn on their own in the learning curves). "
+                "<b>Test success at epoch K</b>: median over seeds of each seed's test success at its last epoch "
+                "K, smoothed (a moving average, below). "
+                "<b>Area under the median curve</b>: mean over epochs 1..K of the median smoothed curve "
+                "(normalised to [0, 1]). "
+                "<b>Epochs to 0.5 / 0.9 success</b>: first epoch the median smoothed curve (or the median of the "
+                "raw test success) reaches 0.5 / 0.9 (empty: never). "
+                "<b>IQM</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
+                "interval (seeded, 2000 resamples). <b>P(improvement over HER)</b>: P(X &gt; Y) + "
                 "0.5 P(X = Y) for X a seed's final success and Y a seed's of HER (eps = 0.8, no MEP) with the same "
-                "learner and number of epochs K, over all pairs."),
+                "learner and number of epochs K, over all pairs. Column names of tables/summary.csv: "
+                "docs/ANALYSIS.md."),
     "aggregate": ("One row per configuration across the tasks it was run on: IQM of all its seeds' final "
-                  "success; the bootstrap resamples seeds within each task (stratified); p_improve_HER is the "
-                  "mean over tasks of the per-task probability of improvement."),
-    "runs": ("One row per run, in progress or complete, with its own numbers: <b>final</b>, its smoothed success "
-             "at its last epoch so far; <b>epochs_to_0.5 / 0.9</b> and <b>raw_epochs_to_0.5 / 0.9</b>, the first "
-             "epoch its smoothed curve and its raw test success reach them (empty: not reached); <b>cpu</b>, the "
-             "CPU its log records (empty for logs that predate it)."),
+                  "success; the bootstrap resamples seeds within each task (stratified); P(improvement over HER) is "
+                  "the mean over tasks of the per-task probability of improvement."),
+    "runs": ("Every run, in progress or complete, one table per task and configuration (click to open), with its "
+             "own numbers: <b>test success at its last epoch</b>, smoothed, so far for a run in progress; "
+             "<b>epochs to 0.5 / 0.9 success</b>, the first epoch its smoothed curve and its raw test success reach "
+             "them (empty: not reached); <b>seconds per epoch</b>, the median of its epochs' wall-clock time; "
+             "<b>CPU</b>, the CPU its log records (empty for logs that predate it). <b>State</b>: complete, or in "
+             "progress (epoch N of K): its log has no completion marker yet (the run is running, or stopped; "
+             "re-running its command resumes it); \"log without a valid end\": the file ends before its footer (a "
+             "log in the earlier format of a run running or killed, or a file cut short), its epochs before the "
+             "cut are read. The run folder's whole path is its cell's tooltip, and in tables/runs.csv with every "
+             "setting."),
     "tests": ("One row per ordered pair of configurations of a task with the same learner and K, each with at "
-              "least two complete seeds: <b>p_final</b>, <b>p_epochs_to_0.5 / 0.9</b>, <b>p_raw_epochs_to_0.5 / "
-              "0.9</b> are one-sided permutation-test p-values (scipy.stats.permutation_test, difference of the "
-              "means over seeds) that <b>config</b> does better than <b>versus</b>: higher final success, fewer "
-              "epochs to a threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
+              "least two complete seeds: each <b>p</b> is a one-sided permutation-test p-value "
+              "(scipy.stats.permutation_test, difference of the means over seeds) that the <b>configuration</b> "
+              "does better than the <b>versus configuration</b>: higher final success, fewer epochs to a "
+              "threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
               "two sides' seeds (5 against 5: 252, so the smallest p is 1/252), or 9999 seeded random splits "
               "when there are more. Each line is one test; reading many at once, expect some small p by chance."),
     "critic_tests": ("The critic's bias (Q minus the discounted return the policy obtains, figure above) of each "
                      "complete run, averaged over epochs 1-50 (trapezoids over its evaluated epochs), for real and "
-                     "for hindsight goals: <b>config_bias</b> / <b>versus_bias</b> the means over runs, "
-                     "<b>difference</b> config minus versus, <b>p_two_sided</b> a two-sided permutation-test p-value "
+                     "for hindsight goals: the configuration's and the versus configuration's means over runs, "
+                     "their difference, and a two-sided permutation-test p-value "
                      "of that difference (scipy.stats.permutation_test, exact up to 9999 splits). Positive bias is "
                      "overestimation."),
     "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
@@ -95,9 +105,16 @@ TABLE_NOTES = {
                     "sum to 1, as drawn in the figure above (black line)."),
 }
 PAGE_STYLE = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:1em}"
-              "table.data{border-collapse:collapse;font-size:0.85em}"
-              "table.data td,table.data th{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right}"
-              "table.data td.text{text-align:left;max-width:30em;overflow-wrap:anywhere}"
+              # a cell wraps between words only: numbers never, text (labels, headers) at its spaces
+              "table.data{border-collapse:collapse;font-size:0.85em;font-variant-numeric:tabular-nums}"
+              "table.data td,table.data th{padding:2px 8px;border-bottom:1px solid #ddd;text-align:right;"
+              "overflow-wrap:normal;word-break:normal}"
+              "table.data td{white-space:nowrap}"
+              "table.data th{vertical-align:bottom;font-weight:600;max-width:9em}"
+              "table.data td.text{text-align:left;white-space:normal;max-width:24em}table.data th.text{text-align:left}"
+              "table.data span.word{white-space:nowrap}"
+              "details.runs{margin:0.3em 0}details.runs>summary{cursor:pointer;padding:2px 0}"
+              "details.runs>table{margin:0.3em 0 1em 1.2em}"
               "img{max-width:100%}figure{margin:2em 0}figcaption{color:#333;max-width:60em}")
 
 
@@ -213,7 +230,8 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
         parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
-              html_table(analysis.summary), "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
+              html_table(_titled(analysis.summary), epochs=_common_epochs(analysis.summary, runs)),
+              "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
               html_table(analysis.aggregate), *_tests_html(analysis.tests), "<h2>Figures</h2>"]
     placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
@@ -224,7 +242,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       f"<p>{TABLE_NOTES['composition']}</p>", html_table(analysis.composition_vs_paper)]
         if figure.name == "critic_bias" and not critic_tests.empty:
             parts += ["<h3>The critic's bias over epochs 1-50: permutation tests</h3>",
-                      f"<p>{TABLE_NOTES['critic_tests']}</p>", html_table(critic_tests)]
+                      f"<p>{TABLE_NOTES['critic_tests']}</p>", html_table(_titled(critic_tests))]
         parts += placed.get(figure.name, [])
     parts += placed.get(None, [])
     if studies.read:
@@ -234,7 +252,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
-    parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", html_table(_run_list(analysis)[RUN_LIST_COLUMNS])]
+    parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", *_runs_html(analysis)]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
 
@@ -246,7 +264,7 @@ def _tests_html(tests: pd.DataFrame) -> list[str]:
         return []
     parts = ["<h2>Permutation tests between configurations</h2>", f"<p>{TABLE_NOTES['tests']}</p>"]
     if len(tests) <= PAGE_TEST_ROWS:
-        return parts + [html_table(tests)]
+        return parts + [html_table(_titled(tests))]
     return parts + [f"<p>{len(tests)} tests: too many for this page; they are in tables/permutation_tests.md "
                     "and .csv.</p>"]
 
@@ -255,6 +273,57 @@ def _run_list(analysis: Analysis) -> pd.DataFrame:
     """The run table with each run's state and own outcomes (:func:`analysis.metrics.run_outcomes`)."""
     runs = analysis.runs
     return runs.assign(state=run_states(runs)).merge(analysis.outcomes, on="run", how="left")
+
+
+def run_state_words(complete: bool, damaged: bool, done: int, total: int) -> str:
+    """A run's state as the page's run list says it: ``complete``, or ``in progress (epoch N of K)`` for a log
+    without its completion marker (a run still running, stopped or killed); ``, log without a valid end`` added
+    for a damaged log (an earlier-format log of a run running or killed, or a file cut short: the epochs before
+    the cut are read)."""
+    state = "complete" if complete else f"in progress (epoch {done} of {total})"
+    return state + (", log without a valid end" if damaged else "")
+
+
+def _titled(table: pd.DataFrame) -> pd.DataFrame:
+    """A table for the page: its ``task`` column (if any) as the tasks' titles (``push`` -> FetchPush)."""
+    return table.assign(task=table["task"].map(task_title)) if "task" in table.columns else table
+
+
+def _common_epochs(table: pd.DataFrame, runs: pd.DataFrame) -> int | None:
+    """The number of epochs K of every complete run of the table's (task, configuration) rows; None if they differ."""
+    keys = table[["task", "config"]].astype(str).apply(tuple, axis=1)
+    complete = runs[runs["complete"]]
+    epochs = complete.loc[complete[["task", "config"]].astype(str).apply(tuple, axis=1).isin(set(keys)),
+                          "total_epochs"].unique()
+    return int(epochs[0]) if len(epochs) == 1 else None
+
+
+def _runs_html(analysis: Analysis) -> list[str]:
+    """The page's run list: per task x configuration a collapsed ``<details>`` whose summary line counts its runs
+    and gives its median final success, and whose table has one row per run (RUN_PAGE_COLUMNS)."""
+    runs = _run_list(analysis)
+    seconds = analysis.epochs.groupby("run")["epoch_seconds"].median().rename("seconds_per_epoch")
+    runs = runs.merge(seconds, left_on="run", right_index=True, how="left").assign(
+        run_folder=[Path(path).parent.name for path in runs["path"]],
+        state=[run_state_words(*values) for values in
+               zip(runs["complete"], runs["damaged"], runs["epochs_done"], runs["total_epochs"])])
+    summary = analysis.summary.set_index(["task", "config"])
+    ranks = runs["task"].map(lambda task: task_rank(task)[0])  # the paper's tasks first, then by name
+    runs = runs.assign(task_order=ranks).sort_values(["task_order", "task", "config", "seed"])  # config: categorical
+    parts = []
+    for (task, config), group in runs.groupby(["task", "config"], observed=True, sort=False):
+        done = int(group["complete"].sum())
+        line = f"{task_title(task)} · {config}: {_count(len(group), 'run')}, {done} complete"
+        if len(group) > done:
+            line += f", {len(group) - done} in progress"
+        if (task, config) in summary.index:
+            row = summary.loc[(task, config)]
+            line += (f"; test success at epoch {int(group.loc[group['complete'], 'total_epochs'].max())}, median "
+                     f"over the complete seeds {row['final_median']:.3f}")
+        parts.append(f'<details class="runs"><summary>{html.escape(line)}</summary>'
+                     + html_table(group[RUN_PAGE_COLUMNS].reset_index(drop=True), columns=RUN_COLUMNS,
+                                  titles={"run_folder": group["path"].reset_index(drop=True)}) + "</details>")
+    return parts
 
 
 def _copy_animations(analysis: Analysis, folder: Path, figures: Path) -> dict[str, str]:
