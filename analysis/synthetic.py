@@ -72,12 +72,13 @@ def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, compl
             "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0, **(meta or {})}
     writer = RunLogWriter(folder / LOG_NAME, meta)
     records = epoch_records(config, test_success)
-    for index, record in enumerate(records):
-        writer.write_epoch({**record, **{name: np.asarray(values)[index].item() for name, values in fields.items()}})
-    if complete:
-        writer.finish(len(records))
-    else:
-        writer.close()
+    with writer.batch():  # one rewrite of the file, not one per epoch
+        for index, record in enumerate(records):
+            writer.write_epoch({**record, **{name: np.asarray(values)[index].item() for name, values in fields.items()}})
+        if complete:
+            writer.finish(len(records))
+        else:
+            writer.close()
     return folder / LOG_NAME
 
 

@@ -34,9 +34,10 @@ import json
 import math
 import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 import mcap
 import pandas as pd
@@ -237,7 +238,7 @@ class RunLogWriter:
     def __init__(self, path: Path, meta: dict[str, Any], previous: "RunLog | None" = None) -> None:
         self.path = Path(path)
         self._messages: list[LoggedMessage] = _carried_over(previous) if previous is not None else []
-        self._closed = False
+        self._closed = self._deferred = False
         self._write("/run/meta", meta)
 
     def _write(self, topic: str, payload: dict[str, Any]) -> None:
@@ -246,7 +247,19 @@ class RunLogWriter:
         now = time.time_ns()
         sequence = max((message.sequence for message in self._messages), default=0) + 1
         self._messages.append(LoggedMessage(topic, now, now, sequence, _plain(_json_safe(payload), verbatim=True)))
-        replace_file(self.path, encode_log(self._messages))
+        if not self._deferred:
+            replace_file(self.path, encode_log(self._messages))
+
+    @contextmanager
+    def batch(self) -> Iterator["RunLogWriter"]:
+        """Messages written inside reach the disk together when it ends (one rewrite, not one per message):
+        for logs written at once, e.g. test fixtures (analysis/synthetic.py)."""
+        self._deferred = True
+        try:
+            yield self
+        finally:
+            self._deferred = False
+            replace_file(self.path, encode_log(self._messages))
 
     def write_epoch(self, record: dict[str, Any]) -> None:
         missing = [name for name in EPOCH_FIELDS if name not in record and name not in OPTIONAL_EPOCH_FIELDS]

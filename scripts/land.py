@@ -1,7 +1,9 @@
 #!/usr/bin/env python
 """Land a campaign's logs in the repository: copy each run's ``run.mcap`` (complete or in
 progress, never a checkpoint) and its ``policy/epoch_<k>.gif`` from the campaign folder to the
-same paths below ``results/``; with ``--commit``, commit each complete run's files with git.
+same paths below ``results/``; with ``--commit``, commit each complete run's files with git. A log is
+landed in the current format of hersd.runlog (a campaign run by an older hersd writes the earlier
+one): every readable message, identical in content (``scripts/convert_logs.py``).
 
     python scripts/land.py [CAMPAIGN_DIR] [--into RESULTS] [--commit]
 
@@ -29,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-from hersd.runlog import LOG_NAME, RunLogError, read_records
+from hersd.runlog import LOG_NAME, RunLogError, read_records, rewritten
 from hersd.runstore import POLICY_DIR, RunFolder
 
 REPOSITORY = Path(__file__).resolve().parent.parent
@@ -68,7 +70,11 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
             landed_complete, landed_epochs, landed_state = log_state(target / LOG_NAME)
             if landed_complete or landed_epochs > epochs:  # a run that restarted has not caught up yet
                 return "kept", landed_complete, f"{landed_state} (the campaign's copy: {state})"
-        changed = write_atomically(snapshot.read_bytes(), target / LOG_NAME)
+        try:
+            data = rewritten(snapshot)  # in the current format, whatever hersd wrote it
+        except RunLogError:
+            data = snapshot.read_bytes()
+        changed = write_atomically(data, target / LOG_NAME)
     finally:
         snapshot.unlink(missing_ok=True)
     animations = RunFolder(source).animations()

@@ -103,6 +103,25 @@ def test_an_unfinished_log_with_more_epochs_is_kept_until_a_restarted_run_passes
     assert len(read_records(results / RUNNING / "run.mcap").records) == 40
 
 
+def test_logs_of_the_earlier_format_land_in_the_current_one_with_every_message_identical(tmp_path, repo):
+    """A campaign run by an older hersd: its logs (complete, and running: no footer) land chunked and indexed."""
+    from mcap.reader import make_reader
+    from test_mcap_readers import write_old_format
+
+    campaign, results = tmp_path / "campaign", repo / "results"
+    for run, complete in ((DONE, True), (RUNNING, False)):
+        (campaign / run).mkdir(parents=True)
+        write_old_format(campaign / run / "run.mcap", 7, complete=complete)
+    out = land(campaign, repo).stdout
+    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 7" in out
+    for run in (DONE, RUNNING):
+        old, new = read_records(campaign / run / "run.mcap"), read_records(results / run / "run.mcap")
+        assert new.messages == old.messages and new.records == old.records and not new.damaged
+        with open(results / run / "run.mcap", "rb") as stream:
+            assert make_reader(stream).get_summary().statistics.channel_message_counts[2] == 7  # /epoch
+    assert "unchanged" in land(campaign, repo).stdout.splitlines()[0]
+
+
 def test_a_missing_campaign_folder_is_one_line_and_exit_2(tmp_path, repo):
     result = land(tmp_path / "nowhere", repo)
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "no folder" in result.stderr

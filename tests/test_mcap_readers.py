@@ -1,0 +1,308 @@
+"""Run logs open in third-party readers, complete, killed mid-run or still running.
+
+- Node's official ``@mcap/core`` (from npm, via tests/mcap_readers.js) reads every committed log
+  and a log killed mid-run with its indexed reader (McapIndexedReader) and its streaming reader
+  (McapStreamReader) and sees every epoch. Needs ``node`` and ``npm`` (Debian: ``nodejs npm``);
+  without them the test skips, with CI=true it fails. The packages are installed once into
+  ``~/.cache/hersd/mcap-node``.
+- Python's ``mcap.reader.make_reader`` (summary-based) reads a log whose writer was killed with
+  SIGKILL at random moments: no acknowledged epoch is lost.
+- Every schema uses only the JSON-schema types Foxglove's parser accepts (Lichtblick's
+  ``parseJsonSchema.ts``: ``boolean``, ``string``, ``number``, ``integer``, ``object`` with
+  ``properties``, ``array`` of those; no ``null``, no unions), and every field written is declared.
+- Logs in the earlier format (unchunked, nullable types, no footer while running) read back,
+  resume into the current format and convert with ``scripts/convert_logs.py``, every record identical.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from hersd.runlog import (CHANNELS, EPOCH_FIELDS, LIBRARY, META_FIELDS, OPTIONAL_EPOCH_FIELDS, RunLogWriter,
+                          read_records, read_run, rewritten)
+from servers import unavailable
+
+REPOSITORY = Path(__file__).resolve().parent.parent
+COMMITTED = sorted((REPOSITORY / "results").rglob("run.mcap"))
+NODE_PACKAGES = ("@mcap/core@2.2.2", "@mcap/nodejs@1.0.2")
+FOXGLOVE_TYPES = {"boolean", "string", "number", "integer", "object", "array"}
+FOXGLOVE_ITEM_TYPES = {"boolean", "string", "number", "integer", "object"}
+
+sys.path.insert(0, str(REPOSITORY / "scripts"))
+import convert_logs  # noqa: E402  (scripts/ is not a package)
+
+
+# --------------------------------------------------------------------------- logs to read
+META = {"run_id": "0badcafe", "config": {"seed": 0, "schedule": {"mean_rate": None}}, "seed": 0,
+        "versions": {"hersd": "test"}, "git_commit": None, "command": "test", "start_time": "2026-01-01T00:00:00+0000",
+        "resumed_from_epoch": 0, "threads": 1, "device": "cpu",
+        "machine": {"cpu_model": "test", "cpu_cores": 1, "machine": "x86_64", "cuda_device": None}}
+
+
+def epoch_record(epoch: int) -> dict:
+    """A record with every required field, MEP's fields None and a bias evaluation at even epochs."""
+    record = {name: (epoch if kind == "integer" else epoch / 1000) for name, (kind, _) in EPOCH_FIELDS.items()
+              if name not in OPTIONAL_EPOCH_FIELDS}
+    record |= {"mep_fit_seconds": None, "priority_entropy": None, "test_distance": 0.25}
+    if epoch % 2 == 0:
+        record |= {"bias_real_mean": 1.5, "bias_real_count": 100, "bias_seconds": 0.5}
+    return record
+
+
+WRITER = f"""
+import sys
+from pathlib import Path
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from test_mcap_readers import META, epoch_record
+from hersd.runlog import RunLogWriter
+writer = RunLogWriter(Path(sys.argv[1]), META)
+for epoch in range(1, 100000):
+    writer.write_epoch(epoch_record(epoch))
+    print(epoch, flush=True)
+"""
+
+
+def killed_log(path: Path, after: int, rng: random.Random) -> int:
+    """Write a log in a subprocess and SIGKILL it a random moment after it acknowledged ``after`` epochs
+    -> the last epoch it acknowledged (the file may hold more)."""
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], stdout=subprocess.PIPE, text=True,
+                            cwd=REPOSITORY)
+    acknowledged = 0
+    for line in proc.stdout:
+        acknowledged = int(line)
+        if acknowledged >= after:
+            break
+    time.sleep(rng.uniform(0, 0.01))  # lands anywhere in the next epoch's rewrite
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    return acknowledged
+
+
+def write_old_format(path: Path, epochs: int, complete: bool, sessions: int = 1) -> None:
+    """A log as hersd wrote it before this format: unchunked, nullable types, nulls stored, every message
+    flushed, no footer while running (``complete=False``: the writer was killed)."""
+    nullable = {"title": "hersd.Epoch", "type": "object", "properties": {
+        name: {"type": [kind, "null"] if name in OPTIONAL_EPOCH_FIELDS else kind} for name, (kind, _) in
+        EPOCH_FIELDS.items()}}
+    stream = open(path, "wb")
+    writer = Writer(stream, use_chunking=False)
+    writer.start(profile="", library="hersd")
+    channels = {}
+    for topic, schema in (("/run/meta", {"title": "hersd.RunMeta", "type": "object", "properties": {
+            "git_commit": {"type": ["string", "null"]}}}), ("/epoch", nullable), ("/run/status", {"type": "object"})):
+        schema_id = writer.register_schema(name=topic, encoding="jsonschema", data=json.dumps(schema).encode())
+        channels[topic] = writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
+    payloads = [("/run/meta", {**META, "resumed_from_epoch": 2 * s}) for s in range(sessions)]
+    payloads += [("/epoch", {name: epoch_record(k).get(name) for name in EPOCH_FIELDS}) for k in range(1, epochs + 1)]
+    payloads += [("/run/status", {"status": "complete", "epochs": epochs, "end_time": "x"})] if complete else []
+    for sequence, (topic, payload) in enumerate(payloads, start=1):
+        writer.add_message(channel_id=channels[topic], log_time=1_000 * sequence, publish_time=1_000 * sequence,
+                           sequence=sequence, data=json.dumps(payload).encode())
+    stream.flush()
+    if complete:
+        writer.finish()
+    stream.close()
+
+
+# --------------------------------------------------------------------------- @mcap/core (Node)
+@pytest.fixture(scope="module")
+def node_path() -> str:
+    """NODE_PATH of @mcap/core and @mcap/nodejs, installed with npm once into ~/.cache/hersd/mcap-node."""
+    missing = [name for name in ("node", "npm") if shutil.which(name) is None]
+    if missing:
+        unavailable(f"{', '.join(missing)} not found; install the Debian packages: apt-get install nodejs npm")
+    folder = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "hersd" / "mcap-node"
+    modules = folder / "node_modules"
+    if not all((modules / package.rsplit("@", 1)[0] / "package.json").exists() for package in NODE_PACKAGES):
+        folder.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run(["npm", "install", "--prefix", str(folder), "--no-audit", "--no-fund",
+                               "--no-save", *NODE_PACKAGES], capture_output=True, text=True, timeout=600)
+        if done.returncode:
+            unavailable(f"npm install {' '.join(NODE_PACKAGES)} failed: {done.stderr.strip()[-300:]}")
+    return str(modules)
+
+
+def read_with_mcap_core(node_path: str, paths: list[Path]) -> dict[str, dict]:
+    done = subprocess.run(["node", str(Path(__file__).with_name("mcap_readers.js")), *map(str, paths)],
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "NODE_PATH": node_path})
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_mcap_core_reads_every_committed_log_and_a_killed_one_indexed_and_streaming(node_path, tmp_path):
+    assert COMMITTED, "no committed logs under results/"
+    killed = tmp_path / "killed" / "run.mcap"
+    killed.parent.mkdir()
+    acknowledged = killed_log(killed, 12, random.Random(0))
+    results = read_with_mcap_core(node_path, [*COMMITTED, killed])
+    wrong = []
+    for path in [*COMMITTED, killed]:
+        records = read_records(path)
+        epochs = [record["epoch"] for record in records.records]
+        expected = {"/run/meta": len(records.sessions), "/epoch": len(epochs)} | (
+            {"/run/status": 1} if records.complete else {})
+        for reader in ("indexed", "stream"):
+            got = results[str(path)][reader]
+            if got.get("error") or got["topics"] != expected or sorted(got["epochs"]) != epochs:
+                shown = got.get("error") or f"topics {got['topics']}, expected {expected}"
+                wrong.append(f"{path.relative_to(REPOSITORY) if path.is_relative_to(REPOSITORY) else 'killed'}: "
+                             f"{reader}: {shown}")
+    assert not wrong, "\n".join(wrong)
+    assert len(read_records(killed).records) >= acknowledged
+
+
+# --------------------------------------------------------------------------- kill -9
+def test_kill_9_at_random_moments_loses_no_acknowledged_epoch(tmp_path):
+    """The summary-based reader (make_reader) opens the file after each kill and sees every epoch acknowledged."""
+    rng = random.Random(1)
+    for attempt in range(6):
+        path = tmp_path / f"run{attempt}" / "run.mcap"
+        path.parent.mkdir()
+        acknowledged = killed_log(path, rng.randint(1, 30), rng)
+        with open(path, "rb") as stream:
+            reader = make_reader(stream)
+            assert reader.get_header().library == LIBRARY
+            epochs = [json.loads(message.data)["epoch"] for _, _, message in reader.iter_messages(topics=["/epoch"])]
+            assert reader.get_summary().statistics.message_count == len(epochs) + 1
+        assert epochs == list(range(1, len(epochs) + 1)) and len(epochs) >= acknowledged
+        assert not read_records(path).damaged
+
+
+# --------------------------------------------------------------------------- schemas
+def foxglove_rejects(schema: dict, where: str) -> list[str]:
+    """What Foxglove's JSON-schema parser would refuse in ``schema`` (an object schema), one line each."""
+    if schema.get("type") != "object" or not isinstance(schema.get("properties"), dict):
+        return [f"{where}: not an object with properties"]
+    problems = []
+    for name, field in schema["properties"].items():
+        kind = field.get("type")
+        if not isinstance(kind, str) or kind not in FOXGLOVE_TYPES:
+            problems.append(f"{where}.{name}: type {json.dumps(kind)}")
+        elif kind == "string" and field.get("contentEncoding") not in (None, "base64"):
+            problems.append(f"{where}.{name}: contentEncoding {field['contentEncoding']}")
+        elif kind == "object":
+            problems += foxglove_rejects(field, f"{where}.{name}")
+        elif kind == "array":
+            items = field.get("items") or {}
+            if not isinstance(items.get("type"), str) or items["type"] not in FOXGLOVE_ITEM_TYPES:
+                problems.append(f"{where}.{name}[]: item type {json.dumps(items.get('type'))}")
+            elif items["type"] == "object":
+                problems += foxglove_rejects(items, f"{where}.{name}[]")
+    return problems
+
+
+def test_every_schema_uses_only_types_foxglove_accepts():
+    problems = [line for topic, (_, schema) in CHANNELS.items() for line in foxglove_rejects(json.loads(schema), topic)]
+    for path in COMMITTED:
+        shown = path.relative_to(REPOSITORY)
+        try:
+            with open(path, "rb") as stream:
+                summary = make_reader(stream).get_summary()
+        except Exception as err:  # noqa: BLE001  (a log without footer or summary)
+            problems.append(f"{shown}: no summary ({type(err).__name__})")
+            continue
+        problems += [f"{shown}: {line}" for schema in summary.schemas.values()
+                     for line in foxglove_rejects(json.loads(schema.data), schema.name)]
+    assert not problems, "\n".join(problems)
+    assert foxglove_rejects({"type": "object", "properties": {"x": {"type": ["number", "null"]}}}, "t") == [
+        't.x: type ["number", "null"]']  # what Foxglove refused in the earlier format
+
+
+def undeclared(value: dict, schema: dict, where: str) -> list[str]:
+    """Keys of ``value`` its schema does not declare, and null field values (an object's nulls are missing keys)."""
+    problems = []
+    for key, item in value.items():
+        field = schema["properties"].get(key)
+        if field is None:
+            problems.append(f"{where}.{key}: not declared")
+        elif item is None:
+            problems.append(f"{where}.{key}: null")
+        elif field.get("type") == "object" and field.get("properties"):
+            problems += undeclared(item, field, f"{where}.{key}")
+    return problems
+
+
+def test_every_field_a_committed_log_holds_is_declared_and_none_is_null():
+    problems = []
+    for path in COMMITTED:
+        with open(path, "rb") as stream:
+            for schema, channel, message in make_reader(stream).iter_messages():
+                shown = f"{path.relative_to(REPOSITORY)}: {channel.topic}"
+                problems += undeclared(json.loads(message.data), json.loads(schema.data), shown)
+    assert not problems, "\n".join(sorted(set(problems))[:20])
+    assert set(META_FIELDS) >= set(META)
+
+
+# --------------------------------------------------------------------------- old format, resume, conversion
+def messages_as_stored(path: Path) -> list[tuple]:
+    """(topic, log_time, publish_time, sequence, payload with null object keys dropped) of every message."""
+    return [(m.topic, m.log_time, m.publish_time, m.sequence, m.payload) for m in read_records(path).messages]
+
+
+def test_old_format_logs_read_resume_and_convert_with_every_record_identical(tmp_path, capsys):
+    complete, running = tmp_path / "a" / "run.mcap", tmp_path / "b" / "run.mcap"
+    for path in (complete, running):
+        path.parent.mkdir()
+    write_old_format(complete, 6, complete=True, sessions=2)
+    write_old_format(running, 5, complete=False)
+    before = {path: (read_records(path), messages_as_stored(path), path.read_bytes()) for path in (complete, running)}
+    assert before[running][0].damaged and not before[complete][0].damaged
+    assert before[complete][0].records[0]["bias_real_mean"] is None and before[complete][0].meta["git_commit"] is None
+
+    # a run in progress under the old writer resumes under this one: the earlier messages keep content and times
+    resumed = tmp_path / "c" / "run.mcap"
+    resumed.parent.mkdir()
+    shutil.copy(running, resumed)
+    previous = read_run(resumed)
+    writer = RunLogWriter(resumed, {**META, "resumed_from_epoch": 5}, previous=previous)
+    writer.write_epoch(epoch_record(6))
+    writer.finish(6)
+    after = messages_as_stored(resumed)
+    assert after[:6] == before[running][1] and [m[0] for m in after[6:]] == ["/run/meta", "/epoch", "/run/status"]
+    assert read_records(resumed).records[:5] == before[running][0].records
+    with open(resumed, "rb") as stream:
+        assert len(list(make_reader(stream).iter_messages(topics=["/epoch"]))) == 6
+
+    # conversion: every message identical in content, times and order; a second pass changes nothing
+    assert convert_logs.main([str(tmp_path)]) == 0
+    first = capsys.readouterr().out
+    for path in (complete, running):
+        records = read_records(path)
+        assert messages_as_stored(path) == before[path][1] and not records.damaged
+        assert (records.sessions, records.records, records.complete) == (
+            before[path][0].sessions, before[path][0].records, before[path][0].complete)
+        assert path.read_bytes() == rewritten(path) != before[path][2]
+    converted = {path: path.read_bytes() for path in (complete, running, resumed)}
+    assert convert_logs.main([str(tmp_path)]) == 0
+    assert {path: path.read_bytes() for path in converted} == converted
+    second = capsys.readouterr().out
+    assert first.count("converted") == 2 and second.count("unchanged") == 3 and "converted" not in second
+
+
+def test_a_resume_keeps_the_log_times_of_earlier_epochs(tmp_path):
+    path = tmp_path / "run.mcap"
+    writer = RunLogWriter(path, META)
+    for epoch in (1, 2, 3):
+        writer.write_epoch(epoch_record(epoch))
+    writer.close()
+    first = messages_as_stored(path)
+    previous = read_run(path)
+    previous.epochs = previous.epochs[previous.epochs["epoch"] <= 2]  # the checkpoint was at epoch 2
+    writer = RunLogWriter(path, {**META, "resumed_from_epoch": 2}, previous=previous)
+    writer.write_epoch(epoch_record(3))
+    after = messages_as_stored(path)
+    assert after[:3] == first[:3] and after[3][0] == "/run/meta" and after[4][1] > first[3][1]
+    assert [record["epoch"] for record in read_records(path).records] == [1, 2, 3]
