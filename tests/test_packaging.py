@@ -9,7 +9,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
-from conftest import TINY
+from helpers import TINY
 
 from hersd.runlog import read_run
 
@@ -36,8 +36,14 @@ def test_the_wheel_holds_every_config_file(wheel):
 @pytest.mark.slow
 def test_a_non_editable_install_runs_the_smoke_sweep_from_an_empty_folder(wheel, tmp_path):
     venv = tmp_path / "venv"
-    # The dependencies come from this interpreter's site-packages; hersd itself only from the wheel.
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
+    # The dependencies come from the site-packages folders of the interpreter running the tests (itself maybe
+    # a virtualenv's, whose packages --system-site-packages would not see), listed in a .pth file as plain
+    # paths: their own .pth files (an editable install of hersd among them) are not run. hersd itself comes
+    # only from the wheel.
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    (site_packages,) = venv.glob("lib/python*/site-packages")
+    (site_packages / "test_dependencies.pth").write_text(
+        "".join(f"{path}\n" for path in sys.path if Path(path).name in ("site-packages", "dist-packages")))
     subprocess.run([venv / "bin" / "python", "-m", "pip", "install", "--quiet", "--no-deps", "--no-index", str(wheel)],
                    check=True, capture_output=True, timeout=300)
     where = subprocess.run([venv / "bin" / "python", "-c", "import hersd.conf; print(hersd.conf.__file__)"],
