@@ -27,13 +27,11 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
-from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, schedule_rank  # noqa: E402
+from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
-from hersd.schedules import FIXED_KINDS, MU_EPS_BAND, SCHEDULE_KINDS  # noqa: E402
+from hersd.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
 from hersd.tasks import task_rank, task_title  # noqa: E402
 
-KIND_TITLES = {"constant": "constant", "linear": "linear decay (β2 = 0)", "exponential": "exponential decay",
-               "success": "success-driven rate"}
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
     "share_real_failure": ("real, unsuccessful", "tab:red"),
@@ -86,8 +84,19 @@ def _lines(text: str) -> int:
 def _config_table(analysis: Analysis) -> pd.DataFrame:
     """One row per config (its schedule and reward weights), in config order."""
     return (analysis.runs.drop_duplicates("config").set_index("config")
-            .loc[:, ["schedule", "eps", "beta1", "beta2", "lambda_r", "lambda_h", "mep", "total_epochs"]]
+            .loc[:, ["schedule", "schedule_tag", "constant_rate", "adaptive", "eps", "beta1", "beta2", "lambda_r",
+                     "lambda_h", "mep", "total_epochs"]]
             .sort_index())
+
+
+def kind_title(kind: str) -> str:
+    """A panel's title for schedules of ``kind``: the class's title, else the kind."""
+    return schedule_class(kind).title or kind
+
+
+def decay_kinds(table: pd.DataFrame) -> list[str]:
+    """The kinds of ``table``'s schedules (columns schedule, constant_rate) that are not constant, in registry order."""
+    return sorted(set(table.loc[~table["constant_rate"].astype(bool), "schedule"]), key=lambda k: (schedule_rank(k), k))
 
 
 def _has_weights(table: pd.DataFrame, weights: tuple[float, float]) -> pd.Series:
@@ -95,19 +104,20 @@ def _has_weights(table: pd.DataFrame, weights: tuple[float, float]) -> pd.Series
     return (table["lambda_r"] == weights[0]) & (table["lambda_h"] == weights[1])
 
 
-def schedule_colours(table: pd.DataFrame) -> dict[tuple, tuple | str]:
-    """Colour of each schedule (kind, eps, beta1, beta2) in ``table`` (columns schedule, eps, beta1, beta2).
+def schedule_colours(table: pd.DataFrame) -> dict[str, tuple | str]:
+    """Colour of each schedule (by its tag) in ``table`` (columns schedule, schedule_tag, constant_rate, eps,
+    beta1, beta2).
 
     Constant HER_EPS black, other constants brown; other schedules take PALETTE in order
     within their kind, so each panel (one kind) uses the most distinct colours.
     """
-    colours: dict[tuple, tuple | str] = {}
+    colours: dict[str, tuple | str] = {}
     count: dict[str, int] = {}
-    rows = table[["schedule", "eps", "beta1", "beta2"]].drop_duplicates()
+    rows = table[["schedule", "schedule_tag", "constant_rate", "eps", "beta1", "beta2"]].drop_duplicates("schedule_tag")
     rows = rows.assign(order=rows["schedule"].map(schedule_rank))
-    for row in rows.sort_values(["order", "beta1", "beta2", "eps"]).itertuples(index=False):
-        key = (row.schedule, row.eps, row.beta1, row.beta2)
-        if row.schedule == "constant":
+    for row in rows.sort_values(["order", "beta1", "beta2", "eps", "schedule_tag"]).itertuples(index=False):
+        key = row.schedule_tag
+        if row.constant_rate:
             colours[key] = "black" if row.eps == HER_EPS else "tab:brown"
         else:
             colours[key] = PALETTE[count.setdefault(row.schedule, 0) % len(PALETTE)]
@@ -117,18 +127,18 @@ def schedule_colours(table: pd.DataFrame) -> dict[tuple, tuple | str]:
 
 def config_styles(analysis: Analysis) -> dict[str, dict]:
     """Line style of every config, the same in every figure: the schedule's colour (ARCHER
-    grey instead of black), dashed with MEP, dash-dot for exponential decays (so the two
-    kinds stay apart where they share a panel). Configs that would still look alike (same
+    grey instead of black), dashed with MEP, else the kind's own (Schedule.line: dash-dot for
+    exponential decays, so kinds stay apart where they share a panel). Configs that would still look alike (same
     schedule, differing in another setting such as epochs) get dotted, then other dash patterns."""
     configs = _config_table(analysis)
     colours = schedule_colours(configs)
     styles = {}
     used: dict[tuple, int] = {}
     for config, row in configs.iterrows():
-        colour = colours[(row["schedule"], row["eps"], row["beta1"], row["beta2"])]
-        if row["schedule"] == "constant" and (row["lambda_r"], row["lambda_h"]) == ARCHER_WEIGHTS:
+        colour = colours[row["schedule_tag"]]
+        if row["constant_rate"] and (row["lambda_r"], row["lambda_h"]) == ARCHER_WEIGHTS:
             colour = "0.55"
-        linestyle = "--" if row["mep"] else ("-." if row["schedule"] == "exponential" else "-")
+        linestyle = "--" if row["mep"] else schedule_class(row["schedule"]).line
         repeats = used.get((colour, linestyle), 0)
         used[(colour, linestyle)] = repeats + 1
         if repeats:
@@ -261,18 +271,17 @@ def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
 
 def _draw_schedules(curves: pd.DataFrame) -> Figure:
     colours = schedule_colours(curves.rename(columns={"eps": "eps_k", "eps_setting": "eps"}))
-    kinds = [kind for kind in FIXED_KINDS[1:] if kind in set(curves["schedule"])] or ["constant"]
+    kinds = decay_kinds(curves) or list(dict.fromkeys(curves["schedule"]))
     several_k = curves["total_epochs"].nunique() > 1
     figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k) = 1 − β1·(k/K)^exp(β2)")
     for axis, kind in zip(axes, kinds):
-        shown = curves[curves["schedule"].isin(["constant", kind])]
+        shown = curves[curves["constant_rate"].astype(bool) | (curves["schedule"] == kind)]
         for (label, total_epochs), curve in shown.groupby(["label", "total_epochs"], sort=False):
             first = curve.iloc[0]
-            colour = colours[(first["schedule"], first["eps_setting"], first["beta1"], first["beta2"])]
-            axis.plot(curve["epoch"], curve["eps"], color=colour, linewidth=1.5,
-                      linestyle="--" if first["schedule"] == "constant" else "-",
+            axis.plot(curve["epoch"], curve["eps"], color=colours[first["schedule_tag"]], linewidth=1.5,
+                      linestyle="--" if first["constant_rate"] else "-",
                       label=label + (f" (K={total_epochs})" if several_k else ""))
-        _set_title(axis, KIND_TITLES[kind])
+        _set_title(axis, kind_title(kind))
         axis.set_ylim(-0.02, 1.02)
         axis.legend(fontsize=7, loc="lower left")
     _label_outer(axes, "relabel rate ε(k)\n(share of goals relabelled)", xlabel="epoch k")
@@ -286,7 +295,7 @@ def _composition_configs(configs: pd.DataFrame, present: set[str]) -> list[str]:
     when some decay schedule was run with them."""
     candidates = configs.loc[[c for c in configs.index if c in present and not configs.loc[c, "mep"]]]
     her_weights = candidates[_has_weights(candidates, HER_WEIGHTS)]
-    if (her_weights["schedule"] != "constant").any():
+    if (~her_weights["constant_rate"]).any():
         candidates = her_weights
     return list(candidates.index)
 
@@ -347,16 +356,15 @@ def _learning_panels(present: pd.DataFrame) -> list[tuple[tuple | None, list[tup
     and the schedules of that kind. Without those: one figure, one panel, every config.
     """
     plain = present[~present["mep"]]
-    decays = plain[plain["schedule"] != "constant"]
+    decays = plain[~plain["constant_rate"]]
     weight_groups = list(dict.fromkeys(zip(decays["lambda_r"], decays["lambda_h"])))
     if not weight_groups:
         return [(None, [("all configurations", list(present.index))])]
     figures = []
     for weights in weight_groups:
         same = plain[_has_weights(plain, weights)]
-        baselines = list(same.index[same["schedule"] == "constant"])
-        panels = [(KIND_TITLES[kind], baselines + list(same.index[same["schedule"] == kind]))
-                  for kind in SCHEDULE_KINDS[1:] if (same["schedule"] == kind).any()]
+        baselines = list(same.index[same["constant_rate"]])
+        panels = [(kind_title(kind), baselines + list(same.index[same["schedule"] == kind])) for kind in decay_kinds(same)]
         figures.append((weights, panels))
     return figures
 
@@ -377,7 +385,7 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
             if weights is None:
                 name, title = f"curves_{task}", f"{task_title(task)}: learning curves"
             else:
-                baselines = [c for c in panels[0][1] if configs.loc[c, "schedule"] == "constant"]
+                baselines = [c for c in panels[0][1] if configs.loc[c, "constant_rate"]]
                 versus = " and ".join(baselines) if baselines else "each other (no constant baseline)"
                 name = f"curves_{task}_lr{weights[0]:g}_lh{weights[1]:g}"
                 title = f"{task_title(task)}: decay schedules vs {versus} ({_weights_text(*weights)})"
@@ -410,7 +418,7 @@ def q_figures(analysis: Analysis) -> list[ReportFigure]:
     configs = _config_table(analysis)
     shown = list(configs.index[~configs["mep"] & _has_weights(configs, HER_WEIGHTS)])
     q_values = analysis.q_means[analysis.q_means["config"].isin(shown)]
-    if q_values.empty or not (configs.loc[shown, "schedule"] != "constant").any():
+    if q_values.empty or not (~configs.loc[shown, "constant_rate"]).any():
         return []
     caption = ("Mean of the critic's Q(s, a) over each epoch's training batches, averaged over the complete seeds, "
                "for HER and the "
@@ -488,7 +496,7 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
     """Fig. 11: per task, each MEP configuration beside the same configuration without MEP."""
     configs = _config_table(analysis)
     mep_configs = configs[configs["mep"]]
-    settings = ["schedule", "eps", "beta1", "beta2", "lambda_r", "lambda_h", "total_epochs"]
+    settings = ["schedule_tag", "lambda_r", "lambda_h", "total_epochs"]
     partners = {config for config, row in configs[~configs["mep"]].iterrows()
                 if (mep_configs[settings] == row[settings]).all(axis=1).any()}
     shown = [c for c in configs.index if c in partners or c in mep_configs.index]
@@ -532,9 +540,9 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     mean_rates = complete.groupby(["task", "config"], observed=True)["mu_eps"].median().reset_index()
     summary = (analysis.summary.merge(_config_table(analysis).reset_index(), on="config")
                .merge(mean_rates, on=["task", "config"]))
-    decays = summary[summary["schedule"] != "constant"]
+    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]  # placed in the beta1 plane
     beta2_colours = {beta2: PALETTE[i % len(PALETTE)]
-                     for i, beta2 in enumerate(sorted(set(decays.loc[decays["schedule"].isin(FIXED_KINDS), "beta2"])))}
+                     for i, beta2 in enumerate(sorted(set(decays.loc[_eq9(decays), "beta2"])))}
     found = []
     for task in ordered_tasks(decays["task"]):
         caption = (f"{task_title(task)}: mean relabel rate μ_ε over training against β1, one line per β2 of the runs "
@@ -548,16 +556,22 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     return found
 
 
+def _eq9(rows: pd.DataFrame) -> pd.Series:
+    """Rows (columns adaptive, beta2) of eq. 9's decays: a function of the epoch with a beta2 (the others in the beta1
+    plane adapt to the run: success-driven rates)."""
+    return ~rows["adaptive"].astype(bool) & rows["beta2"].notna()
+
+
 def _mean_rate_panels(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
     """One panel per (reward weights, MEP) of the decay configurations in ``summary`` (one task's
     summary rows joined with their configs' settings): [(title, its decay rows)]; the title names
     the weights, K and the final success of the constant baselines with the same weights."""
-    decays = summary[summary["schedule"] != "constant"]
+    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]
     panels = []
     for lambda_r, lambda_h, mep in dict.fromkeys(zip(decays["lambda_r"], decays["lambda_h"], decays["mep"])):
         same = _has_weights(summary, (lambda_r, lambda_h)) & (summary["mep"] == mep)
-        group = summary[same & (summary["schedule"] != "constant")]
-        baselines = summary[same & (summary["schedule"] == "constant")]
+        group = summary[same & ~summary["constant_rate"] & summary["beta1"].notna()]
+        baselines = summary[same & summary["constant_rate"]]
         reference = ", ".join(f"{row.config} {row.final_median:.2f}" for row in baselines.itertuples())
         title = (_weights_text(lambda_r, lambda_h) + (", with MEP" if mep else "")
                  + f" (K={int(group['total_epochs'].mode().iloc[0])})"
@@ -578,8 +592,8 @@ def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float,
     _label_outer(axes, "μ_ε (mean relabel rate\nover the K epochs)", xlabel="β1")
     axes[0].plot([], [], color="black", linewidth=1.4, label="eq. 10: exact mean")
     axes[0].plot([], [], color="black", linewidth=1.0, linestyle=":", label="eq. 11: 1 − β1/(1 + e^β2)")
-    decays = summary[summary["schedule"] != "constant"]
-    fixed = decays["schedule"].isin(FIXED_KINDS)
+    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]
+    fixed = _eq9(decays)
     for marker, kinds, label in (("o", fixed, "decay schedule (eq. 10 μ_ε)"),
                                  ("D", ~fixed, "success-driven rate (median over seeds of μ_ε)")):
         if kinds.any():  # the marker kinds; their colours are the colour bar's
@@ -599,7 +613,7 @@ def _mean_rate_panel(axis, group: pd.DataFrame, beta2_colours: dict[float, tuple
     marker per configuration of ``group`` at (beta1, mu_eps)."""
     total_epochs = int(group["total_epochs"].mode().iloc[0])
     axis.axhspan(*MU_EPS_BAND, color="0.85", zorder=0, label=f"best fixed ε of HER, {MU_EPS_BAND[0]}-{MU_EPS_BAND[1]}")
-    fixed = group["schedule"].isin(FIXED_KINDS)
+    fixed = _eq9(group)
     for beta2, line in metrics.mean_rate_lines(list(group.loc[fixed, "beta2"]), total_epochs).groupby("beta2"):
         axis.plot(line["beta1"], line["exact"], color=beta2_colours[beta2], linewidth=1.4, label=f"β2 = {beta2:g}")
         axis.plot(line["beta1"], line["approx"], color=beta2_colours[beta2], linewidth=1.0, linestyle=":")

@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from analysis.workers import ForkedMap
-from hersd.config import AlgoConfig, ScheduleConfig
+from hersd.config import AlgoConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
 from hersd.runstore import HASHED_UNLESS, run_identity
-from hersd.schedules import SCHEDULE_KINDS, effective_beta2, schedule_mean_rate
+from hersd.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
@@ -35,14 +35,19 @@ RUN_COLUMNS = (
     "config",         # configuration label (ordered categorical, see config_label)
     "algo",           # config.algo.name
     "learner",        # config.learner.name: ddpg (the paper's and every run before learners were a setting) | td3 | sac
-    "schedule",       # config.schedule.kind: one of hersd.schedules.SCHEDULE_KINDS
-    "eps", "beta1",
-    "beta2",          # the beta2 of eq. 9 in effect: 0 for linear schedules (hersd.schedules.effective_beta2)
+    "schedule",       # config.schedule.kind: a name of hersd.schedules' registry, or a schedule class's path
+    "schedule_tag",   # the schedule's folder tag (Schedule.tag), one per distinct schedule
+    "schedule_label",  # the schedule's name in the report (Schedule.label)
+    "schedule_record",  # the schedule's record as JSON (Schedule.record; hersd.schedules.schedule_from_record)
+    "constant_rate",  # one rate at every epoch (Schedule.constant_rate): the baselines
+    "adaptive",       # the rate follows the run's progress (Schedule.adaptive)
+    "eps", "beta1",   # the logged settings of the paper's kinds (NaN for kinds without them)
+    "beta2",          # the beta2 of eq. 9 in effect: 0 for linear schedules
     "lambda_r", "lambda_h",
     "mep",            # config.algo.mep.enabled
     "seed",
     "total_epochs",   # K: config.epochs
-    "mu_eps",         # eq. 10 over the run's K (eps itself for constant; the mean logged rate for success)
+    "mu_eps",         # the exact mean rate over the run's K (eq. 10 for eq. 9's kinds); the mean logged rate if adaptive
     "epochs_done",    # completed epochs in the log
     "complete",       # the log says the run finished
     "damaged",        # the file has no valid end (killed or still running)
@@ -53,7 +58,7 @@ RUN_COLUMNS = (
 
 # The baselines the labels name: HER's relabel rate (the schedule's default), HER's and ARCHER's
 # reward weights (lambda_r, lambda_h); ARCHER halves hindsight rewards (conf/algo/archer.yaml).
-HER_EPS = ScheduleConfig().eps
+HER_EPS = Constant().eps
 HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
 ARCHER_WEIGHTS = (1.0, 0.5)
 PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
@@ -73,36 +78,23 @@ class RunTable:
     skipped: list[str] = field(default_factory=list)
 
 
-def schedule_rank(kind: str) -> int:
-    """Sort key of a schedule kind: its place in hersd.schedules.SCHEDULE_KINDS, unknown kinds last."""
-    return SCHEDULE_KINDS.index(kind) if kind in SCHEDULE_KINDS else len(SCHEDULE_KINDS)
-
-
-def schedule_label(schedule: str, eps: float, beta1: float, beta2: float) -> str:
-    """e.g. ``constant eps=0.8``, ``linear b1=0.25``, ``exp b1=0.5 b2=-0.5``, ``success b1=0.25``."""
-    if schedule == "constant":
-        return f"constant eps={eps:g}"
-    if schedule == "success":
-        return f"success b1={beta1:g}"
-    return f"linear b1={beta1:g}" if schedule == "linear" else f"exp b1={beta1:g} b2={beta2:g}"
-
-
-def config_label(schedule: str, eps: float, beta1: float, beta2: float,
-                 lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg") -> str:
+def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg") -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
     than the paper's DDPG lead the label).
 
-    Constant schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
-    appended when eps != HER_EPS; other reward weights are appended as ``λr=`` / ``λh=``.
+    Constant-rate schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
+    appended when eps != HER_EPS; others are named by their label (:meth:`Schedule.label`); other
+    reward weights are appended as ``λr=`` / ``λh=``.
     """
-    if schedule == "constant":
+    if schedule.constant_rate:
+        eps = schedule.rate(1, 1)
         name = "ARCHER" if (lambda_r, lambda_h) == ARCHER_WEIGHTS else "HER"
         qualifiers = [f"eps={eps:g}"] if eps != HER_EPS else []
         if (lambda_r, lambda_h) in (HER_WEIGHTS, ARCHER_WEIGHTS):
             lambda_r, lambda_h = HER_WEIGHTS  # already said by the name
     else:
-        name, qualifiers = schedule_label(schedule, eps, beta1, beta2), []
+        name, qualifiers = schedule.label(), []
     if lambda_r != HER_WEIGHTS[0]:
         qualifiers.append(f"λr={lambda_r:g}")
     if lambda_h != HER_WEIGHTS[1]:
@@ -112,8 +104,8 @@ def config_label(schedule: str, eps: float, beta1: float, beta2: float,
 
 
 def _config_order(run: dict[str, Any]) -> tuple:
-    """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success
-    (SCHEDULE_KINDS); MEP after plain; HER's weights first; then by eps, beta1, beta2."""
+    """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success and
+    the other kinds (hersd.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
     return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
             run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"])
@@ -169,21 +161,26 @@ class ReadLog(NamedTuple):
 def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """One run's columns from its metadata, and its configuration-defining settings."""
     config = meta["config"]
-    schedule = ScheduleConfig(**config["schedule"])
+    schedule = schedule_from_record(config["schedule"])
+    record = schedule.record()
+    mean_rate = schedule.exact_mean_rate(int(config["epochs"]))
     row = {
         "task": config["task"]["name"],
         "algo": config["algo"]["name"],
         "learner": str(config.get("learner", {}).get("name", "ddpg")),
-        "schedule": schedule.kind,
-        "eps": float(schedule.eps),
-        "beta1": float(schedule.beta1),
-        "beta2": effective_beta2(schedule.kind, schedule.beta2),
+        "schedule": kind_name(type(schedule)),
+        "schedule_tag": schedule.tag(),
+        "schedule_label": schedule.label(),
+        "schedule_record": json.dumps(record, sort_keys=True),
+        "constant_rate": schedule.constant_rate,
+        "adaptive": schedule.adaptive,
+        **{name: float(record.get(name, np.nan)) for name in ("eps", "beta1", "beta2")},
         "lambda_r": float(config["algo"]["lambda_r"]),
         "lambda_h": float(config["algo"]["lambda_h"]),
         "mep": bool(config["algo"]["mep"]["enabled"]),
         "seed": int(meta.get("seed", config["seed"])),
         "total_epochs": int(config["epochs"]),
-        "mu_eps": schedule_mean_rate(schedule, int(config["epochs"])),
+        "mu_eps": np.nan if mean_rate is None else mean_rate,
         "run_id": str(meta["run_id"]),
         "cpu": str((meta.get("machine") or {}).get("cpu_model") or ""),
     }
@@ -211,7 +208,7 @@ def read_log(path: Path, folder: Path) -> ReadLog | str:
         return f"{shown}: run metadata lacks or mistypes a config field ({err})"
     row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
     columns = _epoch_columns(log.records)
-    if row["schedule"] == "success" and log.records:  # placed by the rate it realised
+    if row["adaptive"] and log.records:  # placed by the rate it realised
         row["mu_eps"] = float(np.mean(columns["relabel_rate"]))
     return ReadLog(row, settings, columns)
 
@@ -280,8 +277,8 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
 def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     """The runs and epochs tables of readable logs: labels told apart, configs ordered."""
     rows = [dict(log.row) for log in logs]
-    labels = [config_label(r["schedule"], r["eps"], r["beta1"], r["beta2"], r["lambda_r"], r["lambda_h"], r["mep"],
-                           r["learner"]) for r in rows]
+    labels = [config_label(schedule_from_record(json.loads(r["schedule_record"])), r["lambda_r"], r["lambda_h"],
+                           r["mep"], r["learner"]) for r in rows]
     # Within a task, seeds of one label must share every setting; where they do not, say what
     # differs. Across tasks a label may differ in budget (epochs, cycles): tasks are strata.
     groups = [(row["task"], label) for row, label in zip(rows, labels)]

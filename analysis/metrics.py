@@ -14,6 +14,7 @@ Vocabulary (each formula is restated in docs/ANALYSIS.md):
 
 from __future__ import annotations
 
+import json
 import warnings
 from collections import defaultdict
 from dataclasses import dataclass
@@ -21,9 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from analysis.load import HER_EPS, HER_WEIGHTS, schedule_label, schedule_rank
-from hersd.config import ScheduleConfig
-from hersd.schedules import FIXED_KINDS, decay_rate, mean_rate_approx, relabel_rate
+from analysis.load import HER_EPS, HER_WEIGHTS
+from hersd.schedules import decay_rate, mean_rate_approx, schedule_from_record, schedule_rank
 from hersd.tasks import task_rank
 
 GROUP = ["task", "config"]
@@ -169,7 +169,7 @@ def her_baselines(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
     HER configuration (constant HER_EPS, HER's reward weights, no MEP) of the same task, learner
     and K. Left out when there is none, or more than one (they differ in other settings)."""
     setup = ["task", "learner", "total_epochs"]
-    her = runs[(runs["schedule"] == "constant") & (runs["eps"] == HER_EPS) & (runs["lambda_r"] == HER_WEIGHTS[0])
+    her = runs[runs["constant_rate"] & (runs["eps"] == HER_EPS) & (runs["lambda_r"] == HER_WEIGHTS[0])
                & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"].astype(bool)]
     her_configs = {key: set(group["config"].astype(str)) for key, group in her.groupby(setup, observed=True)}
     baselines = {}
@@ -323,7 +323,7 @@ def composition_versus_paper(shares: pd.DataFrame, runs: pd.DataFrame, task: str
     share_real_success, share_hindsight, share_real_failure (the paper's order). Empty when no
     such run reached the epoch.
     """
-    her = runs[(runs["task"] == task) & (runs["schedule"] == "constant") & (runs["eps"] == HER_EPS)
+    her = runs[(runs["task"] == task) & runs["constant_rate"] & (runs["eps"] == HER_EPS)
                & (runs["lambda_r"] == HER_WEIGHTS[0]) & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"]
                & (runs["learner"] == "ddpg")]
     ours = shares[(shares["task"] == task) & (shares["epoch"] == epoch) & shares["config"].isin(her["config"])]
@@ -344,24 +344,25 @@ def mean_q(epochs: pd.DataFrame) -> pd.DataFrame:
 
 
 def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
-    """eps(k) for k = 1..K of every distinct fixed schedule (kind, eps, beta1, beta2, K) among the runs
-    (success schedules depend on each run's progress: their rates are in the logs, not drawn here).
+    """eps(k) for k = 1..K of every distinct schedule that does not adapt (its record, K) among the runs
+    (adaptive schedules depend on each run's progress: their rates are in the logs, not drawn here).
 
-    Returns columns label (:func:`schedule_label`), schedule, eps_setting, beta1, beta2,
-    total_epochs, epoch, eps; in the order constant, linear, exponential, then by beta1, beta2.
+    Returns columns label (Schedule.label), schedule (kind), schedule_tag, constant_rate, eps_setting, beta1,
+    beta2, total_epochs, epoch, eps; in the registry's order of kinds, then by beta1, beta2, eps, tag.
     """
-    settings = ["schedule", "eps", "beta1", "beta2", "total_epochs"]
-    distinct = runs.loc[runs["schedule"].isin(FIXED_KINDS), settings].drop_duplicates()
+    settings = ["schedule", "schedule_tag", "schedule_record", "constant_rate", "eps", "beta1", "beta2", "total_epochs"]
+    distinct = runs.loc[~runs["adaptive"].astype(bool), settings].drop_duplicates(["schedule_record", "total_epochs"])
     distinct = distinct.assign(order=distinct["schedule"].map(schedule_rank))
     frames = []
-    for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "total_epochs"]).itertuples(index=False):
-        schedule = ScheduleConfig(kind=run.schedule, eps=run.eps, beta1=run.beta1, beta2=run.beta2)
-        k = np.arange(1, run.total_epochs + 1)
+    for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "schedule_tag", "total_epochs"]).itertuples(index=False):
+        schedule = schedule_from_record(json.loads(run.schedule_record))
         frames.append(pd.DataFrame({
-            "label": schedule_label(run.schedule, run.eps, run.beta1, run.beta2), "schedule": run.schedule,
-            "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2, "total_epochs": run.total_epochs,
-            "epoch": k, "eps": [relabel_rate(schedule, int(i), run.total_epochs) for i in k]}))
-    columns = ["label", "schedule", "eps_setting", "beta1", "beta2", "total_epochs", "epoch", "eps"]
+            "label": schedule.label(), "schedule": run.schedule, "schedule_tag": run.schedule_tag,
+            "constant_rate": run.constant_rate, "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2,
+            "total_epochs": run.total_epochs, "epoch": np.arange(1, run.total_epochs + 1),
+            "eps": schedule.rates(int(run.total_epochs))}))
+    columns = ["label", "schedule", "schedule_tag", "constant_rate", "eps_setting", "beta1", "beta2", "total_epochs",
+               "epoch", "eps"]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
 
 

@@ -37,14 +37,14 @@ from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.schedules import MU_EPS_BAND, effective_beta2, mean_rate_approx  # noqa: E402
+from hersd.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, registered  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
-from hersd.study import (KIND_PARAMS, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
-                         StudyStorageError, mean_rates, trial_params)
+from hersd.study import (PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
+                         StudyStorageError, kind_params, mean_rates, schedule_config, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
-PLANE_KINDS = tuple(kind for kind, names in KIND_PARAMS.items() if "beta1" in names)  # eq. 9 decays
+PLANE_KINDS = tuple(kind for kind in known_kinds() if "beta1" in kind_params(kind))  # eq. 9 decays
 COLUMNS = ["trial", "state", "value", *PARAM_NAMES, "mu_eps", "mu_eps_approx", "in_band", "last_step", "retry_of",
            "duration_s", "run_dirs"]
 
@@ -62,12 +62,12 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
         decays = kind in PLANE_KINDS
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
                "beta1": params.get("beta1"),
-               "beta2": effective_beta2(kind, params.get("beta2", 0.0)) if decays else None,
+               "beta2": getattr(schedule_config(params), "beta2", None) if decays else None,
                "eps": params.get("eps"), "lambda_h": params.get("lambda_h"), "last_step": trial.last_step,
                "retry_of": trial.user_attrs.get(RETRY_OF_ATTR),
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
                "run_dirs": ";".join(trial.user_attrs.get(RUN_DIRS_ATTR, []))}
-        if kind in KIND_PARAMS and set(KIND_PARAMS[kind]) <= set(params):
+        if kind is not None and registered(kind) is not None and set(kind_params(kind)) <= set(params):
             exact, approx = mean_rates(params, epochs or 1)
             row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
                        in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])

@@ -6,16 +6,14 @@ training's logs.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hersd.config import TrainConfig
+from hersd.config import TrainConfig, config_record
 from hersd.runlog import LOG_NAME, RunLogWriter
 from hersd.runstore import RunFolder, config_hash
-from hersd.schedules import relabel_rate
 
 
 def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[str, Any]]:
@@ -28,8 +26,7 @@ def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[st
     success = np.asarray(test_success, dtype=float)
     k = np.arange(1, len(success) + 1)
     train_success = 0.9 * success
-    rate = np.array([relabel_rate(config.schedule, int(epoch), config.epochs, train_success[:int(epoch) - 1])
-                     for epoch in k])
+    rate = np.array([config.schedule.rate(int(epoch), config.epochs, train_success[:int(epoch) - 1]) for epoch in k])
     cycles = config.task.cycles_per_epoch
     mep = config.algo.mep.enabled
     columns = {
@@ -67,7 +64,7 @@ def write_run(folder: Path, config: TrainConfig, test_success: np.ndarray, compl
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    meta = {"run_id": config_hash(config), "config": dataclasses.asdict(config), "seed": config.seed,
+    meta = {"run_id": config_hash(config), "config": config_record(config), "seed": config.seed,
             "versions": {"hersd": "synthetic"}, "git_commit": None, "command": "analysis.synthetic",
             "start_time": "2025-01-01T00:00:00+0000", "resumed_from_epoch": 0, **(meta or {})}
     writer = RunLogWriter(folder / LOG_NAME, meta)

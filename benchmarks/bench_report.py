@@ -31,7 +31,6 @@ import numpy as np
 from analysis.synthetic import write_run
 from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 from hersd.runstore import run_dir
-from hersd.schedules import schedule_mean_rate
 
 BUDGET_SECONDS = 8.0
 EPOCHS = 200
@@ -85,7 +84,7 @@ def _write_logs(folder: Path) -> int:
             for seed in range(SEEDS):
                 config = TrainConfig(task=TaskConfig(name=task), algo=algo,
                                      schedule=schedule, seed=seed, epochs=EPOCHS, results_dir=str(folder))
-                curve = success_curve(rng, difficulty, schedule_mean_rate(schedule, EPOCHS), EPOCHS)
+                curve = success_curve(rng, difficulty, config.schedule.exact_mean_rate(EPOCHS), EPOCHS)
                 write_run(run_dir(config), config, curve)
                 count += 1
     return count

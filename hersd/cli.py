@@ -14,9 +14,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hersd import schedules
 from hersd.compose import compose_train, explain_config_error, group_options
 from hersd.config import ConfigError, TrainConfig
+from hersd.schedules import TARGET_KEY, known_kinds, schedule_class
 from hersd.runstore import RunLockedError, check_writable, run_dir
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
@@ -46,7 +46,10 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
     defaults = schema()
     for item in dataclasses.fields(schema):
         value: Any = getattr(defaults, item.name)
-        if dataclasses.is_dataclass(value):
+        if item.name == "schedule":
+            lines.append(f"  {prefix}schedule.kind={value.kind}".ljust(34) + "  the schedule (below), or "
+                         f"schedule.{TARGET_KEY}=<module>.<Class>: a hersd.schedules.Schedule of your own")
+        elif dataclasses.is_dataclass(value):
             lines += schema_lines(type(value), f"{prefix}{item.name}.")
         else:
             shown = "null" if value is None else str(value).lower() if isinstance(value, bool) else value
@@ -54,10 +57,16 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
     return lines
 
 
-def schedule_formulas() -> list[str]:
-    """The relabel rate of each schedule.kind, as listed in :mod:`hersd.schedules`' docstring."""
-    doc = schedules.__doc__
-    return [f"  {line}" for line in doc[doc.index("- constant:"):].split("\n\n")[0].splitlines()]
+def schedule_lines() -> list[str]:
+    """Each schedule kind's formula, then its settings (``schedule.<name>=default  doc``), as its class declares them."""
+    lines = []
+    for kind in known_kinds():
+        cls = schedule_class(kind)
+        lines.append(f"  {kind}: {cls.formula}")
+        for item in cls.params():
+            shown = "null" if item.default is None else item.default
+            lines.append(f"    schedule.{item.name}={shown}".ljust(34) + f"  {item.metadata['doc']}")
+    return lines
 
 
 def usage() -> str:
@@ -70,8 +79,8 @@ def usage() -> str:
         "config groups (conf/<group>/*.yaml):", *groups, "",
         "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
         *schema_lines(TrainConfig), "",
-        "schedules (eps(k): the relabel rate of epoch k = 1..K; fields are schedule.<name>):",
-        *schedule_formulas(),
+        "schedules (eps(k): the relabel rate of epoch k = 1..K; schedule=<kind> or schedule.kind=<kind>, then its settings):",
+        *schedule_lines(),
     ])
 
 

@@ -24,9 +24,19 @@ def register_schema(name: str, node: Any, group: str | None = None) -> None:
     ConfigStore.instance().store(name=name, node=node, group=group)
 
 
+def open_schedule(schema: type) -> DictConfig:
+    """A training schema as a config whose ``schedule`` node takes any key: each schedule kind has settings
+    of its own, which the kind's class checks when the config is built (:mod:`hersd.schedules`)."""
+    from omegaconf import OmegaConf
+
+    node = OmegaConf.structured(schema)
+    OmegaConf.set_struct(node.schedule, False)
+    return node
+
+
 def register_train_schema() -> None:
-    """``train_schema``, which conf/train.yaml and conf/sweep.yaml list first."""
-    register_schema("train_schema", TrainConfig)
+    """``train_schema``, which conf/train.yaml lists first."""
+    register_schema("train_schema", open_schedule(TrainConfig))
 
 
 def compose(config_name: str | None, overrides: list[str], job_name: str, with_hydra: bool = False) -> DictConfig:

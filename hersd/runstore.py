@@ -26,11 +26,11 @@ import json
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from hersd.config import ConfigError, ScheduleConfig, TrainConfig
+from hersd.config import ConfigError, TrainConfig, config_record
 from hersd.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 
 CHECKPOINT_NAME = "checkpoint.pt"
@@ -48,17 +48,6 @@ class RunLockedError(RuntimeError):
     """Another process is running the same configuration."""
 
 
-def schedule_tag(schedule: ScheduleConfig) -> str:
-    """e.g. ``constant-0.8``, ``linear-b1_0.25``, ``exponential-b1_0.5-b2_-1``, ``success-b1_0.5-w10``."""
-    if schedule.kind == "constant":
-        return f"constant-{schedule.eps:g}"
-    if schedule.kind == "success":
-        return f"success-b1_{schedule.beta1:g}-w{schedule.window}"
-    if schedule.kind == "linear":
-        return f"linear-b1_{schedule.beta1:g}"
-    return f"exponential-b1_{schedule.beta1:g}-b2_{schedule.beta2:g}"
-
-
 def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     """What identifies a run: its config as a nested dict, less :data:`NOT_HASHED` and the
     :data:`HASHED_UNLESS` defaults; of ``learner`` only the learner in use and its own settings,
@@ -67,7 +56,7 @@ def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     ``config`` is a TrainConfig or its dict as a log's ``/run/meta`` holds it; a log written
     before a field existed has the identity of a new log of the same run.
     """
-    content = asdict(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
+    content = config_record(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
     content = {key: value for key, value in content.items() if key not in NOT_HASHED}
     learner = content.pop("learner", {"name": "ddpg"})
     if learner["name"] != "ddpg":
@@ -92,7 +81,7 @@ def run_dir(cfg: TrainConfig) -> Path:
     if cfg.run_dir is not None:
         return Path(cfg.run_dir)
     algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{cfg.learner.name}-{cfg.algo.name}"
-    return Path(cfg.results_dir) / cfg.task.name / algo / schedule_tag(cfg.schedule) / f"seed{cfg.seed}-{config_hash(cfg)}"
+    return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{config_hash(cfg)}"
 
 
 @dataclass(frozen=True)

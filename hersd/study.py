@@ -6,7 +6,7 @@
   ``*.log`` / ``*.journal`` a journal, anything else a SQLite file. Its users open it:
   ``sweeps.search.storage`` for writing (the search), ``analysis.studies`` read-only (the
   report); every failure is a :class:`StudyStorageError` with one line, passwords hidden.
-- What a trial is: its parameters (:data:`KIND_PARAMS`), how Optuna stores them
+- What a trial is: its schedule kind's searched parameters (:func:`kind_params`), how Optuna stores them
   (:func:`stored_params`, :func:`trial_params`), and the schedule and run config they stand
   for (:func:`schedule_config`, :func:`trial_config`).
 - What the search writes into the study and its trials for the report to read: the user
@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from hersd.config import ConfigError, ScheduleConfig, TrainConfig
-from hersd.schedules import FIXED_KINDS, schedule_mean_rates
+from hersd.config import ConfigError, TrainConfig
+from hersd.schedules import SCHEDULES, Schedule, known_kinds, schedule_class
 
 JOURNAL_PREFIX = "journal:"
 JOURNAL_SUFFIXES = (".log", ".journal")
@@ -39,10 +39,7 @@ DRIVER_HINTS = {"postgresql": 'pip install "hersd[cluster]" (psycopg2, which pos
 SCHEMES = "use sqlite:///<file>, postgresql://..., another SQLAlchemy URL, or journal:<file>"
 MESSAGE_LIMIT = 200  # characters of a database's own error message kept in ours
 
-# The schedule kinds a search draws (eq. 9's, known before the run) and each one's parameters.
-KIND_PARAMS = {"constant": ("eps",), "linear": ("beta1",), "exponential": ("beta1", "beta2")}
-assert tuple(KIND_PARAMS) == FIXED_KINDS
-PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")  # every parameter a trial may have
+PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")  # the parameters of the paper's kinds' trials
 
 # User attributes hersd-search writes and hersd-report reads. The search's own bookkeeping
 # (trial attributes worker, heartbeat, interrupted, refused, lost, pruned_reason, mu_eps,
@@ -153,6 +150,18 @@ def connect_args(url: Any, read_only: bool) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- trials
 
+def kind_params(kind: str) -> tuple[str, ...]:
+    """The parameters a search draws for schedules of ``kind`` (its class's ``searched``)."""
+    return schedule_class(kind).searched
+
+
+def searchable(kind: str) -> bool:
+    """Whether a search can draw schedules of ``kind``: it has searched parameters and does not adapt to the
+    run (an adaptive schedule's rate is known only once run)."""
+    cls = schedule_class(kind)
+    return bool(cls.searched) and not cls.adaptive
+
+
 def stored_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
     """A trial's parameters as Optuna stores them: ``kind`` only when several kinds are searched
     (with one, it is not drawn)."""
@@ -160,19 +169,19 @@ def stored_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
 
 
 def trial_params(stored: dict[str, Any]) -> dict[str, Any]:
-    """A trial's parameters as Optuna stored them -> with ``kind``: stored, else the kind whose
-    parameters they are (None if none fits)."""
+    """A trial's parameters as Optuna stored them -> with ``kind``: stored, else the registered kind whose
+    searched parameters they are (None if none fits)."""
     if "kind" in stored:
         return dict(stored)
     names = set(stored) - {"lambda_h"}
-    kind = next((kind for kind, params in KIND_PARAMS.items() if set(params) == names), None)
+    kind = next((kind for kind in known_kinds() if set(kind_params(kind)) == names), None)
     return {"kind": kind, **stored}
 
 
-def schedule_config(params: dict[str, Any]) -> ScheduleConfig:
-    """A trial's schedule: its kind, with that kind's parameters given in ``params`` (ScheduleConfig's checks run)."""
+def schedule_config(params: dict[str, Any]) -> Schedule:
+    """A trial's schedule: its kind, with that kind's parameters given in ``params`` (the class's checks run)."""
     kind = params["kind"]
-    return ScheduleConfig(kind=kind, **{name: float(params[name]) for name in KIND_PARAMS[kind] if name in params})
+    return schedule_class(kind)(**{name: float(params[name]) for name in kind_params(kind) if name in params})
 
 
 def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: str | None = None) -> TrainConfig:
@@ -182,15 +191,20 @@ def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: 
 
 
 def param_overrides(params: dict[str, Any]) -> list[str]:
-    """A trial's parameters as ``hersd-train`` overrides (floats written exactly): the same run as :func:`trial_config`."""
+    """A trial's parameters as ``hersd-train`` overrides (floats written exactly): the same run as :func:`trial_config`.
+    The package's kinds by their preset (conf/schedule/<kind>.yaml), others by ``schedule.kind=<name or class path>``."""
     kind = params["kind"]
-    overrides = [f"schedule={kind}"] + [f"schedule.{name}={float(params[name])!r}" for name in KIND_PARAMS[kind]]
+    chosen = f"schedule={kind}" if kind in SCHEDULES else f"schedule.kind={kind}"
+    overrides = [chosen] + [f"schedule.{name}={float(params[name])!r}" for name in kind_params(kind)]
     return overrides + ([f"algo.lambda_h={float(params['lambda_h'])!r}"] if "lambda_h" in params else [])
 
 
 def mean_rates(params: dict[str, Any], epochs: int) -> tuple[float, float]:
-    """mu_eps of a trial's schedule: exact over its epochs (eq. 10) and the approximation (eq. 11)."""
-    return schedule_mean_rates(params["kind"], params.get("eps"), params.get("beta1"), params.get("beta2"), epochs)
+    """mu_eps of a trial's schedule: exact over its epochs and as K -> infinity (eq. 10 and 11 for eq. 9's kinds);
+    NaN where the schedule does not know it."""
+    schedule = schedule_config(params)
+    exact, limit = schedule.exact_mean_rate(epochs), schedule.limit_mean_rate()
+    return (float("nan") if exact is None else exact), (float("nan") if limit is None else limit)
 
 
 # --------------------------------------------------------------------------- the study's settings

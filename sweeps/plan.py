@@ -24,7 +24,7 @@ from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
-from hersd.compose import register_schema, register_train_schema
+from hersd.compose import open_schedule, register_schema, register_train_schema
 from hersd.config import ConfigError, TrainConfig, to_train_config
 from hersd.resources import available_cores
 from hersd.runstore import run_dir
@@ -59,7 +59,7 @@ class PlannedRun:
 def register_schemas() -> None:
     """``train_schema`` and ``sweep_schema`` (which conf/sweep.yaml lists first)."""
     register_train_schema()
-    register_schema("sweep_schema", SweepConfig)
+    register_schema("sweep_schema", open_schedule(SweepConfig))
 
 
 # ``${hersd_cores:}``: this process's cores, the local launcher's n_jobs (conf/hydra/launcher/local.yaml);

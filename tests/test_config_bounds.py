@@ -11,7 +11,7 @@ import typing
 from pathlib import Path
 
 import pytest
-from conftest import TINY
+from helpers import TINY
 
 import hersd.run_state
 import hersd.train
@@ -22,6 +22,7 @@ from hersd.config import (AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPCo
 from hersd.envs import EnvSpec
 from hersd.runlog import read_run
 from hersd.runstore import CHECKPOINT_NAME
+from hersd.schedules import SCHEDULES
 
 INF, NAN, HUGE = float("inf"), float("nan"), 1e308
 BIG_INT = 10 ** 18
@@ -34,10 +35,12 @@ def _reach(**settings) -> TrainConfig:
 SCHEMAS = {  # the field's owner, built with one setting -> a config object
     "task": lambda **s: TaskConfig(name="reach", **s),
     "algo.mep": MEPConfig, "algo": AlgoConfig, "ddpg": DDPGConfig,
-    "schedule": lambda **s: ScheduleConfig(kind="exponential", **s),
+    "schedule": lambda **s: ScheduleConfig(kind=SCHEDULE_OF[next(iter(s))], **s),
     "schedule.mean_rate": lambda **s: ScheduleConfig(kind="linear", **s),
     "learner.td3": TD3Config, "learner.sac": SACConfig, "bias": BiasConfig, "": _reach,
 }
+SCHEDULE_OF = {"eps": "constant", "beta1": "exponential", "beta2": "exponential", "window": "success",
+               "eps_min": "success", "start": "cosine", "end": "cosine"}  # a kind with the setting
 WEIGHT = ([0.0, -1.0, 9.9e-7, 1.1e6, HUGE, INF, NAN], [1e-6, 1.0, 1e6])  # lambda, alpha: [1e-6, 1e6]
 SHARE = ([-0.1, 1.1, HUGE, INF, NAN], [0.0, 1.0])  # probabilities and rates: [0, 1]
 RATE = ([0.0, -1e-3, 1.5, HUGE, INF, NAN], [1e-12, 1.0])  # Adam learning rates: (0, 1]
@@ -55,7 +58,7 @@ TABLE: dict[str, tuple[list, list]] = {
     "algo.lambda_r": WEIGHT, "algo.lambda_h": WEIGHT,
     "schedule.eps": SHARE, "schedule.beta1": SHARE, "schedule.eps_min": SHARE, "schedule.mean_rate": SHARE,
     "schedule.beta2": ([-50.1, 50.1, -HUGE, HUGE, INF, NAN], [-50.0, 0.0, 50.0]),
-    "schedule.window": COUNT,
+    "schedule.window": COUNT, "schedule.start": SHARE, "schedule.end": SHARE,
     "ddpg.hidden_layers": SIZED, "ddpg.hidden_units": SIZED, "ddpg.buffer_size": ([0, -1], [256]),
     "ddpg.batch_size": ([0, -1, 10 ** 6 + 1, BIG_INT], [1, 10 ** 6]),  # within buffer_size (10^6)
     "ddpg.rollouts_per_cycle": SIZED, "ddpg.batches_per_cycle": COUNT, "ddpg.test_rollouts": COUNT,
@@ -109,7 +112,8 @@ def _numeric_fields(schema: type, prefix: str = "") -> list[str]:
 
 
 def test_the_table_covers_every_numeric_setting_with_a_refused_value():
-    fields = _numeric_fields(TrainConfig)
+    schedules = {f"schedule.{item.name}" for cls in SCHEDULES.values() for item in cls.params() if "low" in item.metadata}
+    fields = _numeric_fields(TrainConfig) + sorted(schedules)
     assert sorted(fields) == sorted(TABLE)
     assert all(TABLE[field][0] for field in fields)
 

@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 
 from hersd.compose import compose, compose_train, group_options
-from hersd.config import TrainConfig
+from hersd.config import TrainConfig, config_record
 from hersd.runlog import read_run
 from hersd.runstore import NOT_HASHED, config_hash, run_identity
+from hersd.schedules import schedule_from_record
 from hersd.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
@@ -20,7 +21,8 @@ from sweeps.launch import register_schemas
 def test_every_group_option_composes(group):
     assert group_options(group)
     for option in group_options(group):
-        extra = ["task.env_id=HandManipulateEgg-v1"] if option == CUSTOM else []
+        extra = {CUSTOM: ["task.env_id=HandManipulateEgg-v1"], "table": ["epochs=2", "schedule.rates=[0.9,0.8]"]}
+        extra = extra.get(option, []) if group in ("task", "schedule") else []
         cfg = compose_train([f"{group}={option}", *extra])
         assert isinstance(cfg, TrainConfig)
 
@@ -122,10 +124,36 @@ def test_every_committed_log_keeps_its_directory():
         assert (path.parent.name, meta["run_id"]) == (f"seed{meta['seed']}-{recomputed}", recomputed), path
 
 
+def test_every_committed_log_keeps_its_tag_and_identity_through_its_schedule_class():
+    """A log's schedule record read back as its kind's class gives the same record (so a new config of that run
+    hashes as the log does) and the folder tag the log lies in."""
+    for path in committed_logs():
+        config = read_run(path).meta["config"]
+        schedule = schedule_from_record(config["schedule"])
+        assert schedule.tag() == path.parent.parent.name, path
+        assert config_hash({**config, "schedule": schedule.record()}) == config_hash(config), path
+
+
+@pytest.mark.parametrize("preset", group_options("schedule"))
+def test_the_paper_kinds_presets_keep_their_tags_and_records(preset):
+    """Tags of the conf/schedule presets, as the flat schema made them (a record holds every flat field)."""
+    golden = {"constant": "constant-0.8", "constant_mu_linear_025": "constant-0.874375",
+              "exponential": "exponential-b1_0.25-b2_0.25", "linear": "linear-b1_0.25", "success": "success-b1_0.25-w10",
+              "cosine": "cosine-1_0.5", "table": None}
+    golden.update({f"paper_{shape}_{n:03d}": f"linear-b1_{n / 100:g}" if shape == "linear"
+                   else f"exponential-b1_{n / 100:g}-b2_{n / 100:g}" for shape in ("linear", "exp") for n in (25, 50, 75, 100)})
+    if golden[preset] is None:  # a table needs its rates
+        return
+    schedule = compose_train([f"schedule={preset}"]).schedule
+    assert schedule.tag() == golden[preset]
+    if preset != "cosine":
+        assert set(schedule.record()) == {"kind", "eps", "beta1", "beta2", "mean_rate", "window", "eps_min"}
+
+
 def test_a_config_and_its_logged_dict_have_one_identity_however_old_the_log():
     cfg = compose_train(["task=push", "learner=td3", "schedule=paper_exp_050"])
-    assert run_identity(asdict(cfg)) == run_identity(cfg)
-    old = asdict(compose_train(["task=push"]))
+    assert run_identity(config_record(cfg)) == run_identity(cfg)
+    old = config_record(compose_train(["task=push"]))
     for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
         del old[key]
     for key in ("window", "eps_min"):

@@ -3,7 +3,6 @@ resumed and old logs, reading in worker processes."""
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,7 @@ from analysis.figures import config_styles
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
-from hersd.config import ScheduleConfig
+from hersd.config import ScheduleConfig, config_record
 from hersd.runlog import RunLogWriter, read_run
 from hersd.runstore import config_hash
 
@@ -33,13 +32,14 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
 
 
 @pytest.mark.parametrize("settings, label", [
-    (("constant", 0.8, 0, 0, 1.0, 1.0, False), "HER"),
-    (("constant", 0.8, 0, 0, 1.0, 0.5, False), "ARCHER"),
-    (("constant", 0.8, 0, 0, 1.0, 1.0, True), "HER-MEP"),
-    (("constant", 0.9, 0, 0, 1.0, 1.0, False), "HER eps=0.9"),
-    (("linear", 0.8, 0.25, 0, 1.0, 1.0, False), "linear b1=0.25"),
-    (("exponential", 0.8, 0.5, -0.5, 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
-    (("linear", 0.8, 0.5, 0, 1.0, 1.0, True), "linear b1=0.5-MEP"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False), "HER"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 0.5, False), "ARCHER"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, True), "HER-MEP"),
+    ((ScheduleConfig("constant", eps=0.9), 1.0, 1.0, False), "HER eps=0.9"),
+    ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False), "linear b1=0.25"),
+    ((ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
+    ((ScheduleConfig("linear", beta1=0.5), 1.0, 1.0, True), "linear b1=0.5-MEP"),
+    ((ScheduleConfig("cosine", start=1.0, end=0.5), 1.0, 1.0, False), "cosine 1→0.5"),
 ])
 def test_config_labels(settings, label):
     assert config_label(*settings) == label
@@ -62,7 +62,7 @@ def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
 
 def test_a_log_made_before_fields_existed_shares_the_configuration_of_new_logs(tmp_path):
     write_run(tmp_path / "new", make_config(seed=1), np.zeros(6))
-    config = dataclasses.asdict(make_config())
+    config = config_record(make_config())
     for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
         del config[key]
     for key in ("window", "eps_min"):

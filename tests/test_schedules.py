@@ -4,33 +4,33 @@ import numpy as np
 import pytest
 
 from hersd.config import ScheduleConfig
-from hersd.schedules import mean_rate_approx, mean_rate_exact, relabel_rate, schedule_mean_rate
+from hersd.schedules import mean_rate_approx, mean_rate_exact
 
 
 def test_constant_rate_is_eps_every_epoch():
     schedule = ScheduleConfig(kind="constant", eps=0.8)
-    assert [relabel_rate(schedule, k, 200) for k in (1, 100, 200)] == [0.8, 0.8, 0.8]
+    assert [schedule.rate(k, 200) for k in (1, 100, 200)] == [0.8, 0.8, 0.8]
 
 
 def test_linear_rate_by_hand():
     schedule = ScheduleConfig(kind="linear", beta1=0.5)
     # eps(k) = 1 - 0.5 * k / 4
-    assert [relabel_rate(schedule, k, 4) for k in range(1, 5)] == pytest.approx([0.875, 0.75, 0.625, 0.5])
+    assert [schedule.rate(k, 4) for k in range(1, 5)] == pytest.approx([0.875, 0.75, 0.625, 0.5])
 
 
 def test_exponential_rate_by_hand():
     # exp(ln 2) = 2: eps(k) = 1 - 0.5 * (k / 4)^2
     schedule = ScheduleConfig(kind="exponential", beta1=0.5, beta2=math.log(2))
-    assert [relabel_rate(schedule, k, 4) for k in range(1, 5)] == pytest.approx(
+    assert [schedule.rate(k, 4) for k in range(1, 5)] == pytest.approx(
         [1 - 0.5 / 16, 1 - 0.5 / 4, 1 - 0.5 * 9 / 16, 0.5])
     # beta2 < 0 is convex: exp(-ln 2) = 1/2, eps(1) = 1 - 0.5 * (1/4)^0.5 = 0.75
     convex = ScheduleConfig(kind="exponential", beta1=0.5, beta2=-math.log(2))
-    assert relabel_rate(convex, 1, 4) == pytest.approx(0.75)
+    assert convex.rate(1, 4) == pytest.approx(0.75)
 
 
 def test_final_rate_is_one_minus_beta1():
     for beta2 in (-1.0, 0.0, 0.75):
-        assert relabel_rate(ScheduleConfig(kind="exponential", beta1=0.3, beta2=beta2), 50, 50) == pytest.approx(0.7)
+        assert ScheduleConfig(kind="exponential", beta1=0.3, beta2=beta2).rate(50, 50) == pytest.approx(0.7)
 
 
 def test_mean_rate_exact_eq10_by_hand():
@@ -47,25 +47,18 @@ def test_mean_rate_approx_eq11_by_hand_and_as_limit():
     assert mean_rate_exact(0.75, 0.5, 100_000) == pytest.approx(mean_rate_approx(0.75, 0.5), abs=1e-4)
 
 
-def test_schedule_mean_rate_dispatches_by_kind():
-    assert schedule_mean_rate(ScheduleConfig(kind="constant", eps=0.8), 200) == 0.8
-    assert schedule_mean_rate(ScheduleConfig(kind="linear", beta1=0.5), 4) == pytest.approx(0.6875)
-
-
-def test_epoch_index_outside_range_is_rejected():
-    with pytest.raises(ValueError):
-        relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 0, 4)
-    with pytest.raises(ValueError):
-        relabel_rate(ScheduleConfig(kind="linear", beta1=0.5), 5, 4)
+def test_each_kind_gives_its_exact_mean_rate():
+    assert ScheduleConfig(kind="constant", eps=0.8).exact_mean_rate(200) == 0.8
+    assert ScheduleConfig(kind="linear", beta1=0.5).exact_mean_rate(4) == pytest.approx(0.6875)
 
 
 def test_success_schedule_by_hand():
     schedule = ScheduleConfig(kind="success", beta1=0.5, window=2, eps_min=0.7)
-    assert relabel_rate(schedule, 1, 10, []) == 1.0  # nothing learnt yet: relabel everything
-    assert relabel_rate(schedule, 2, 10, [0.2]) == pytest.approx(1 - 0.5 * 0.2)
-    assert relabel_rate(schedule, 4, 10, [0.0, 0.2, 0.4]) == pytest.approx(1 - 0.5 * 0.3)  # last 2 epochs
-    assert relabel_rate(schedule, 5, 10, [1.0, 1.0, 1.0, 1.0]) == 0.7  # clipped at eps_min
-    assert np.isnan(schedule_mean_rate(schedule, 10))  # known only from the run's log
+    assert schedule.rate(1, 10, []) == 1.0  # nothing learnt yet: relabel everything
+    assert schedule.rate(2, 10, [0.2]) == pytest.approx(1 - 0.5 * 0.2)
+    assert schedule.rate(4, 10, [0.0, 0.2, 0.4]) == pytest.approx(1 - 0.5 * 0.3)  # last 2 epochs
+    assert schedule.rate(5, 10, [1.0, 1.0, 1.0, 1.0]) == 0.7  # clipped at eps_min
+    assert schedule.exact_mean_rate(10) is None  # known only from the run's log
 
 
 def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exactly(tmp_path):
@@ -104,13 +97,13 @@ def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exac
     assert metrics(resumed).equals(reference.drop(columns=[c for c in reference if c.endswith("_seconds")]))
 
 
-def test_train_help_states_every_schedules_formula_and_fields(capsys):
+def test_train_help_states_every_schedules_formula_and_settings(capsys):
     from hersd.cli import main
 
     main(["--help"])
     out = capsys.readouterr().out
     formulas = out[out.index("schedules (eps(k)"):]
-    assert "fields are schedule.<name>" in formulas
-    assert "success:      eps(k) = clip(1 - beta1 * s(k), eps_min, 1), s(k) = the mean train success" in formulas
-    assert "of the last `window` epochs before k" in formulas
-    assert "exponential:  eps(k) = 1 - beta1 * (k / K) ** exp(beta2)" in formulas
+    assert "success: eps(k) = clip(1 - beta1 * s(k), eps_min, 1)" in formulas
+    assert "exponential: eps(k) = 1 - beta1 * (k / K) ** exp(beta2)" in formulas
+    assert "cosine: eps(k) = end + (start - end) * (1 + cos(pi * k / K)) / 2" in formulas
+    assert "schedule.window=10" in formulas and "schedule.from_run=null" in formulas

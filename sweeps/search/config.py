@@ -10,13 +10,14 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Dict, Optional
 
 from hersd.compose import compose, explain_config_error, group_options, register_schema as store_schema
 from hersd.config import ConfigError
 from hersd.resources import available_cores
 from hersd.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
-from hersd.study import JOURNAL_PREFIX, KIND_PARAMS, schedule_config, stored_params
+from hersd.schedules import Exponential, known_kinds, schedule_class
+from hersd.study import JOURNAL_PREFIX, kind_params, schedule_config, searchable, stored_params
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")
@@ -40,11 +41,14 @@ class Bounds:
 class SpaceConfig:
     """What the search draws: the schedule kinds and each parameter's range."""
 
-    kinds: list[str] = field(default_factory=lambda: ["exponential"])  # schedule kinds searched (a categorical if > 1)
+    # schedule kinds searched (a categorical if > 1): registered names or class paths (hersd.schedules)
+    kinds: list[str] = field(default_factory=lambda: [Exponential.kind])
     beta1: Bounds = field(default_factory=lambda: Bounds(0.0, 1.0))  # eq. 9 final drop, within [0, 1]
     beta2: Bounds = field(default_factory=lambda: Bounds(-2.0, 2.0))  # eq. 9 shape (exponential kind only)
     eps: Bounds = field(default_factory=lambda: Bounds(0.5, 1.0))  # fixed rate (constant kind only)
     lambda_h: Optional[Bounds] = None  # hindsight reward weight (eq. 8); null keeps the algo's
+    # other kinds' searched parameters by name (e.g. cosine's start, end); default: the range the schedule declares
+    ranges: Dict[str, Bounds] = field(default_factory=dict)
 
 
 @dataclass
@@ -115,10 +119,20 @@ def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
     _check(value in choices, f"{name}={value!r} is unknown; choose one of: {', '.join(choices)}")
 
 
+def space_bounds(space: SpaceConfig, kind: str, name: str) -> Bounds:
+    """The range a search draws parameter ``name`` of ``kind`` from: search.space.<name> (beta1, beta2, eps),
+    search.space.ranges.<name>, else the range the schedule class declares."""
+    if name in ("beta1", "beta2", "eps"):
+        return getattr(space, name)
+    if name in space.ranges:
+        return space.ranges[name]
+    meta = next(item.metadata for item in schedule_class(kind).params() if item.name == name)
+    return Bounds(meta["low"], meta["high"])
+
+
 def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
     """The ranges the search draws from, by parameter name (unused ranges left out)."""
-    names = [name for kind in space.kinds for name in KIND_PARAMS[kind]]
-    named = {name: getattr(space, name) for name in dict.fromkeys(names)}
+    named = {name: space_bounds(space, kind, name) for kind in space.kinds for name in kind_params(kind)}
     return {**named, "lambda_h": space.lambda_h} if space.lambda_h is not None else named
 
 
@@ -133,16 +147,22 @@ def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
 def check_space(space: SpaceConfig) -> None:
     """Kinds known and distinct; each searched range finite, ordered, loggable, and valid for the schedule."""
     kinds = list(space.kinds)
-    _check(bool(kinds) and len(set(kinds)) == len(kinds) and set(kinds) <= set(KIND_PARAMS),
-           f"search.space.kinds must be a non-empty list of distinct kinds among {', '.join(KIND_PARAMS)} "
-           f"(success schedules are not searched: their rate is known only once run); got {kinds}")
+    _check(bool(kinds) and len(set(kinds)) == len(kinds), f"search.space.kinds must be a non-empty list of "
+                                                          f"distinct kinds; got {kinds}")
+    for kind in kinds:
+        try:
+            fits = searchable(kind)
+        except ConfigError as err:
+            raise ConfigError(f"search.space.kinds: {err}") from None
+        _check(fits, f"search.space.kinds: {kind} cannot be searched (it declares no searched parameters or adapts "
+                     f"to the run); searchable kinds: {', '.join(k for k in known_kinds() if searchable(k))}")
     for name, bounds in searched_bounds(space).items():
         where = f"search.space.{name}"
         _check(_is_number(bounds.low) and _is_number(bounds.high),
                f"{where}: bounds must be finite numbers, got [{bounds.low}, {bounds.high}]")
         _check(bounds.low <= bounds.high, f"{where}: low ({bounds.low}) must be <= high ({bounds.high})")
         _check(not bounds.log or bounds.low > 0, f"{where}: log=true needs low > 0, got {bounds.low}")
-        for kind in (k for k in kinds if name in KIND_PARAMS[k]):
+        for kind in (k for k in kinds if name in kind_params(k)):
             for end in ("low", "high"):
                 check_schedule(kind, {name: getattr(bounds, end)}, f"{where}.{end}={getattr(bounds, end)}")
     if space.lambda_h is not None:
@@ -180,7 +200,7 @@ def enqueued_kind(params: dict[str, Any], kinds: list[str]) -> str | None:
     if "kind" in params or len(kinds) == 1:
         return params.get("kind", kinds[0])
     names = set(params) - {"lambda_h"}
-    fitting = [kind for kind in kinds if names <= set(KIND_PARAMS[kind])]
+    fitting = [kind for kind in kinds if names <= set(kind_params(kind))]
     return fitting[0] if len(fitting) == 1 else None
 
 
@@ -198,7 +218,7 @@ def check_enqueue(search: SearchConfig) -> None:
         kind = enqueued_kind(params, kinds)
         _check(kind in kinds, f"{where}: kind={params.get('kind')!r} is not among search.space.kinds {kinds}"
                if "kind" in params else f"{where}: say which kind it is (kind: one of {kinds})")
-        allowed = KIND_PARAMS[kind] + (("lambda_h",) if search.space.lambda_h is not None else ())
+        allowed = kind_params(kind) + (("lambda_h",) if search.space.lambda_h is not None else ())
         extra = sorted(map(str, set(params) - {"kind", *allowed}))
         _check(not extra, f"{where}: {', '.join(extra)} not searched for kind {kind}; its parameters: "
                           f"{', '.join(allowed)}")

@@ -22,18 +22,18 @@ import optuna
 from hersd.config import ConfigError, TrainConfig
 from hersd.runlog import LOG_NAME, read_records
 from hersd.runstore import run_dir
-from hersd.study import KIND_PARAMS, RUN_DIRS_ATTR, mean_rates, param_overrides, trial_config
-from sweeps.search.config import SpaceConfig
+from hersd.study import RUN_DIRS_ATTR, kind_params, mean_rates, param_overrides, trial_config
+from sweeps.search.config import SpaceConfig, space_bounds
 from sweeps.search.plan import SearchPlan
 
 
 def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
-    """Draw a trial's schedule -> {"kind", then "eps" | "beta1" [, "beta2"] by kind [, "lambda_h"]: float}."""
+    """Draw a trial's schedule -> {"kind", then the kind's searched parameters [, "lambda_h"]: float}."""
     kinds = list(space.kinds)
     kind = trial.suggest_categorical("kind", kinds) if len(kinds) > 1 else kinds[0]
     params: dict[str, Any] = {"kind": kind}
-    for name in KIND_PARAMS[kind] + (("lambda_h",) if space.lambda_h is not None else ()):
-        bounds = getattr(space, name)
+    for name in kind_params(kind) + (("lambda_h",) if space.lambda_h is not None else ()):
+        bounds = space.lambda_h if name == "lambda_h" else space_bounds(space, kind, name)
         params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)
     return params
 

@@ -19,9 +19,9 @@ from hersd.compose import compose_train
 from hersd.config import ConfigError, ScheduleConfig, TrainConfig
 from hersd.resources import resolve_threads
 from hersd.runstore import check_writable, config_hash
-from hersd.study import KIND_PARAMS, SEARCH_FOLDER, StudySettings, default_storage, trial_config
+from hersd.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
 from sweeps.search.storage import resolve_storage
-from sweeps.search.config import SearchConfig, enqueued_kind
+from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every
 # run of every trial would share one directory.
@@ -82,7 +82,8 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
               for i, params in enumerate(search.enqueue)]
     for kind in search.space.kinds:
         for end in ("low", "high"):
-            params = {"kind": kind, **{name: getattr(getattr(search.space, name), end) for name in KIND_PARAMS[kind]}}
+            params = {"kind": kind, **{name: getattr(space_bounds(search.space, kind, name), end)
+                                       for name in kind_params(kind)}}
             if search.space.lambda_h is not None:
                 params["lambda_h"] = getattr(search.space.lambda_h, end)
             probes.append((f"search.space ({kind}, {end} ends)", params))

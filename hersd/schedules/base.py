@@ -1,0 +1,113 @@
+"""What every relabel-rate schedule declares about itself (:class:`Schedule`).
+
+A schedule is a dataclass whose fields are its parameters, each made by :func:`param` with a
+range and a one-line doc: they are the ``schedule.<name>`` keys of ``hersd-train --help``, the
+range checks (one-line :class:`ConfigError` naming the field) and the search's default range.
+Its methods give the rate of epoch k of K, the exact mean rate (None when it adapts to the
+run), the folder tag, the report's label and the record logs keep (the run's identity).
+Imports neither torch nor the config: every layer can use it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Sequence
+
+import numpy as np
+
+from hersd.errors import ConfigError
+
+# The settings every log of the paper's kinds (constant, linear, exponential, success) holds, at
+# these values where the kind has no such setting: one flat schema served them when those logs
+# were written, and their folders' hashes cover these fields (hersd.runstore.run_identity).
+FLAT_RECORD: dict[str, Any] = {"eps": 0.8, "beta1": 0.0, "beta2": 0.0, "mean_rate": None, "window": 10,
+                               "eps_min": 0.0}
+
+
+def param(default: Any, low: float, high: float, doc: str, integer: bool = False, optional: bool = False) -> Any:
+    """A schedule parameter: ``default``, its range [low, high], a one-line ``doc``; ``integer`` for whole
+    numbers, ``optional`` when null is allowed (the default then is usually None)."""
+    return field(default=default, metadata={"low": low, "high": high, "doc": doc, "integer": integer,
+                                            "optional": optional})
+
+
+@dataclass
+class Schedule:
+    """A relabel-rate schedule: eps(k), the probability that a sampled transition's goal is
+    replaced by a hindsight goal during epoch k (1..K)."""
+
+    # The name schedule.kind selects: the package's kinds and entry points (hersd.schedules.registry) set it;
+    # a class without one is selected and recorded by its import path (schedule._target_=<module>.<Class>).
+    kind: ClassVar[str] = ""
+    formula: ClassVar[str] = ""  # eps(k) in one line, for hersd-train --help
+    title: ClassVar[str] = ""  # the report's panel title for schedules of this kind ("" : the kind)
+    adaptive: ClassVar[bool] = False  # the rate depends on the run's history, not on the epoch alone
+    constant_rate: ClassVar[bool] = False  # one rate at every epoch (the report's baselines: HER, ARCHER)
+    searched: ClassVar[tuple[str, ...]] = ()  # the parameters a search draws (hersd-search)
+    line: ClassVar[str] = "-"  # matplotlib line style of its curves in the report
+    flat_record: ClassVar[bool] = False  # its logs hold FLAT_RECORD's fields too (the paper's kinds)
+
+    def __post_init__(self) -> None:
+        for item in self.params():
+            if "low" in item.metadata:
+                check_param(item, getattr(self, item.name))
+
+    @classmethod
+    def params(cls) -> list[dataclasses.Field]:
+        """The parameters (fields with a ``doc``; ranged ones made by :func:`param`), in declaration order."""
+        return [item for item in dataclasses.fields(cls) if "doc" in item.metadata]
+
+    def resolve(self, total_epochs: int) -> None:
+        """Settle what depends on the run's K (or on files) before the run; called once per config."""
+
+    def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
+        """eps(k) in force during epoch k (1-based) of total_epochs; ``train_success`` (k-1,) holds the
+        train success of epochs 1..k-1 (adaptive schedules read it)."""
+        raise NotImplementedError
+
+    def rates(self, total_epochs: int) -> np.ndarray:
+        """eps(k) for k = 1..K, shape (K,); only for schedules that do not adapt."""
+        return np.array([self.rate(k, total_epochs) for k in range(1, total_epochs + 1)], dtype=float)
+
+    def exact_mean_rate(self, total_epochs: int) -> float | None:
+        """mu_eps, the mean of eps(k) over k = 1..K exactly; None when the schedule adapts to the run."""
+        return None if self.adaptive else float(np.mean(self.rates(total_epochs)))
+
+    def limit_mean_rate(self) -> float | None:
+        """mu_eps as K -> infinity (eq. 11 for eq. 9's kinds); None when unknown."""
+        return None
+
+    def tag(self) -> str:
+        """The folder a run of it lives in, below <task>/<algo>/, e.g. ``linear-b1_0.25``."""
+        raise NotImplementedError
+
+    def label(self) -> str:
+        """Its name in the report, e.g. ``linear b1=0.25``."""
+        raise NotImplementedError
+
+    def record(self) -> dict[str, Any]:
+        """The schedule as a log's ``/run/meta`` config holds it and the run's identity hashes it:
+        ``kind`` and every parameter (and FLAT_RECORD's fields for the paper's kinds)."""
+        own = {item.name: getattr(self, item.name) for item in self.params()}
+        return {"kind": kind_name(type(self)), **(FLAT_RECORD if self.flat_record else {}), **own}
+
+
+def kind_name(cls: type[Schedule]) -> str:
+    """The kind a schedule class is recorded under: its ``kind``, else its import path."""
+    return cls.kind or f"{cls.__module__}.{cls.__qualname__}"
+
+
+def check_param(item: dataclasses.Field, value: Any) -> None:
+    """ConfigError (one line, naming ``schedule.<name>``) unless ``value`` is in the parameter's range."""
+    meta = item.metadata
+    if value is None and meta["optional"]:
+        return
+    whole = meta["integer"]
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
+        and (not whole or float(value).is_integer()) and meta["low"] <= value <= meta["high"]
+    if not ok:
+        what = "a whole number" if whole else "a number"
+        raise ConfigError(f"schedule.{item.name} must be {what} in [{meta['low']:g}, {meta['high']:g}]"
+                          f"{' or null' if meta['optional'] else ''}, got {value}")
