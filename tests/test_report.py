@@ -12,7 +12,7 @@ import pytest
 
 from analysis import metrics
 from analysis.figures import composition_figures
-from analysis.report import main as report_main
+from analysis.report import main as report_main, run_state_words
 from analysis.synthetic import write_run
 
 from analysis_logs import make_config, write_campaign_midway
@@ -164,3 +164,11 @@ def test_storages_in_the_search_folder_are_found_and_a_bad_one_is_skipped(storag
     assert {path.name for path in (tmp_path / "out" / "search").glob("*.png")} == {
         "in_sqlite_beta_plane.png", "in_journal_beta_plane.png"}
     assert "study storage" in (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
+
+
+def test_the_run_list_says_each_state_in_words():
+    assert run_state_words(complete=True, damaged=False, done=200, total=200) == "complete"
+    assert run_state_words(complete=False, damaged=False, done=39, total=200) == "in progress (epoch 39 of 200)"
+    assert run_state_words(complete=False, damaged=True, done=39, total=200) == (
+        "in progress (epoch 39 of 200), log without a valid end")
+    assert run_state_words(complete=True, damaged=True, done=200, total=200) == "complete, log without a valid end"
