@@ -360,7 +360,7 @@ def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
             "label": schedule.label(), "schedule": run.schedule, "schedule_tag": run.schedule_tag,
             "constant_rate": run.constant_rate, "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2,
             "total_epochs": run.total_epochs, "epoch": np.arange(1, run.total_epochs + 1),
-            "eps": schedule.rates(int(run.total_epochs))}))
+            "eps": schedule.epoch_rates(int(run.total_epochs))}))
     columns = ["label", "schedule", "schedule_tag", "constant_rate", "eps_setting", "beta1", "beta2", "total_epochs",
                "epoch", "eps"]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)

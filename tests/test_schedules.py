@@ -107,3 +107,96 @@ def test_train_help_states_every_schedules_formula_and_settings(capsys):
     assert "exponential: eps(k) = 1 - beta1 * (k / K) ** exp(beta2)" in formulas
     assert "cosine: eps(k) = end + (start - end) * (1 + cos(pi * k / K)) / 2" in formulas
     assert "schedule.window=10" in formulas and "schedule.from_run=null" in formulas
+
+
+def test_cosine_runs_from_start_to_end_and_its_exact_mean_rate_is_its_formulas():
+    schedule = ScheduleConfig(kind="cosine", start=0.9, end=0.3)
+    for total in (1, 2, 7, 200):
+        rates = schedule.epoch_rates(total)
+        assert rates[-1] == pytest.approx(0.3) and np.all(np.diff(rates) <= 1e-12)
+        assert schedule.exact_mean_rate(total) == pytest.approx(float(np.mean(rates)), abs=1e-12)
+    assert schedule.limit_mean_rate() == pytest.approx(0.6)
+
+
+def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
+    from analysis.synthetic import write_run
+    from hersd.config import ConfigError, TrainConfig
+
+    inline = TrainConfig(schedule={"kind": "table", "rates": [0.9, 0.8, 0.7]}, epochs=3).schedule
+    assert list(inline.epoch_rates(3)) == [0.9, 0.8, 0.7] and inline.exact_mean_rate(3) == pytest.approx(0.8)
+    (tmp_path / "rates.txt").write_text("0.9, 0.8\n0.7\n")
+    from_file = TrainConfig(schedule={"kind": "table", "file": str(tmp_path / "rates.txt")}, epochs=3).schedule
+    assert from_file.record() == inline.record() and from_file.tag() == inline.tag()  # the rates, not the path
+    # a success-driven run's realised rates replayed as a function of the epoch
+    success = TrainConfig(schedule={"kind": "success", "beta1": 0.5, "window": 1}, epochs=4)
+    write_run(tmp_path / "run", success, np.array([0.0, 0.5, 1.0, 1.0]))
+    replay = TrainConfig(schedule={"kind": "table", "from_run": str(tmp_path / "run")}, epochs=4).schedule
+    assert list(replay.epoch_rates(4)) == pytest.approx([1.0, 1 - 0.5 * 0.9 * 0.0, 1 - 0.5 * 0.9 * 0.5, 1 - 0.5 * 0.9])
+    assert replay.record()["from_run"] is None and replay.tag().startswith("table-")
+    with pytest.raises(ConfigError, match="^schedule.rates holds 3 rates but epochs=5"):
+        TrainConfig(schedule={"kind": "table", "rates": [0.9, 0.8, 0.7]}, epochs=5)
+    with pytest.raises(ConfigError, match="^schedule.from_run="):
+        TrainConfig(schedule={"kind": "table", "from_run": str(tmp_path / "nowhere")}, epochs=4)
+
+
+def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
+    from hersd.config import TrainConfig
+    from hersd.schedules import known_kinds
+
+    (tmp_path / "steps.py").write_text(STEP_SOURCE)
+    dist = tmp_path / "steps-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: steps\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[hersd.schedules]\nstep = steps:Step\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert "step" in known_kinds()
+    schedule = TrainConfig(schedule={"kind": "step", "low": 0.4}, epochs=4).schedule
+    assert list(schedule.epoch_rates(4)) == [0.9, 0.9, 0.4, 0.4] and schedule.record() == {"kind": "step", "high": 0.9, "low": 0.4}
+
+
+STEP_SOURCE = '''
+from dataclasses import dataclass
+
+from hersd.schedules import Schedule, param
+
+
+@dataclass
+class Step(Schedule):
+    kind = "step"
+    formula = "eps(k) = high for k <= K/2, low after"
+    searched = ("low",)
+
+    high: float = param(0.9, 0.0, 1.0, "the rate of the first half")
+    low: float = param(0.5, 0.0, 1.0, "the rate of the second half")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.high if 2 * k <= total_epochs else self.low
+
+    def tag(self):
+        return f"step-{self.high:g}_{self.low:g}"
+
+    def label(self):
+        return f"step {self.high:g}->{self.low:g}"
+'''
+
+# Strings equal to a kind's name that are not that kind: the env's info key and a column of success rates.
+NOT_KINDS = {("hersd/envs.py", "success"), ("hersd/render.py", "success"), ("analysis/metrics.py", "success")}
+
+
+def test_kind_names_are_literals_only_in_their_own_schedule_file():
+    """Every other layer asks the schedule (its class, its record) instead of matching on its kind."""
+    import ast
+    from pathlib import Path
+
+    from hersd.schedules import SCHEDULES
+
+    root = Path(__file__).resolve().parent.parent
+    found = []
+    for package in ("hersd", "sweeps", "analysis"):
+        for path in sorted((root / package).rglob("*.py")):
+            name = path.relative_to(root).as_posix()
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.Constant) and node.value in SCHEDULES and (name, node.value) not in NOT_KINDS \
+                        and name != f"hersd/schedules/{node.value}.py":
+                    found.append(f"{name}:{node.lineno} {node.value!r}")
+    assert not found

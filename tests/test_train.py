@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import TINY as TINY_RUN, metrics
+from helpers import TINY as TINY_RUN, metrics
 
 from hersd.cli import main
 from hersd.compose import compose_train as compose
@@ -211,7 +211,13 @@ def test_truncated_log_reads_back_its_complete_epochs(tmp_path):
     ("task.env_id=HandReach-v3", "task=custom"),
     ("task=cartpole", "task"),
     ("algo.goal_strategy=nearest", "algo.goal_strategy"),
-    ("schedule=cosine", "schedule"),
+    ("schedule=sawtooth", "schedule"),
+    ("schedule.kind=sawtooth", "schedule.kind"),
+    ("schedule._target_=no_such_module.Step", "no_such_module.Step"),
+    ("schedule=constant schedule.beta1=0.5", "schedule.beta1"),  # not a setting of constant
+    ("schedule=table schedule.rates=[0.9,0.8] epochs=3", "epochs=3"),  # one rate per epoch
+    ("schedule=table", "schedule.rates"),
+    ("schedule=cosine schedule.end=2", "schedule.end"),
     ("epochs=0", "epochs"),
     ("epochs=ten", "epochs"),
     ("no_such_key=1", "no_such_key"),

@@ -67,13 +67,13 @@ class Schedule:
         train success of epochs 1..k-1 (adaptive schedules read it)."""
         raise NotImplementedError
 
-    def rates(self, total_epochs: int) -> np.ndarray:
+    def epoch_rates(self, total_epochs: int) -> np.ndarray:
         """eps(k) for k = 1..K, shape (K,); only for schedules that do not adapt."""
         return np.array([self.rate(k, total_epochs) for k in range(1, total_epochs + 1)], dtype=float)
 
     def exact_mean_rate(self, total_epochs: int) -> float | None:
         """mu_eps, the mean of eps(k) over k = 1..K exactly; None when the schedule adapts to the run."""
-        return None if self.adaptive else float(np.mean(self.rates(total_epochs)))
+        return None if self.adaptive else float(np.mean(self.epoch_rates(total_epochs)))
 
     def limit_mean_rate(self) -> float | None:
         """mu_eps as K -> infinity (eq. 11 for eq. 9's kinds); None when unknown."""
