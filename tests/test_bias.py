@@ -4,7 +4,7 @@ rollouts from the restored state, and a run's metrics and folder untouched by it
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import TINY, metrics
+from helpers import TINY, metrics
 
 from hersd.bias import BiasEvaluator, discounted_returns
 from hersd.compose import compose_train

@@ -58,7 +58,7 @@ def test_critic_curves_give_median_and_quartiles_over_seeds():
 
 def test_the_report_draws_the_critic_from_real_logs(tmp_path):
     """Two seeds each of two schedules, with bias evaluations: the figure has a panel per measure."""
-    from conftest import TINY
+    from helpers import TINY
 
     from analysis.figures import critic_figures
     from analysis.load import load_runs

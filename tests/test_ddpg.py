@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 import torch
-from conftest import BATCH, batch, tiny_learner
+from helpers import BATCH, batch, tiny_learner
 
 
 def tiny_agent(**changes):

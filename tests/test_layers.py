@@ -135,3 +135,19 @@ def test_the_architecture_doc_names_every_module_and_only_modules_that_exist():
     names = {path.name for path in modules}
     ghosts = [n for n in named if not ((ROOT / n).exists() if "/" in n else n in names)]
     assert not ghosts, f"docs/ARCHITECTURE.md names modules that do not exist: {ghosts}"
+
+
+def test_no_test_file_imports_another():
+    """A test file's shared fixtures come from conftest.py and its plain helpers from modules that are not test files
+    (helpers.py, analysis_logs.py, servers.py): importing a test module runs its collection twice and ties two
+    files' tests together."""
+    test_modules = {path.stem for path in (ROOT / "tests").glob("test_*.py")}
+    wrong = []
+    for path in sorted((ROOT / "tests").glob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] + [alias.name for alias in node.names if node.level] \
+                if isinstance(node, ast.ImportFrom) else []
+            wrong += [f"tests/{path.name}:{node.lineno} imports {name}" for name in names
+                      if name.split(".")[0] in test_modules or name.startswith("tests.test_")]
+    assert not wrong, wrong

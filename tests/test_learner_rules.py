@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from conftest import ACTION, BATCH, batch, tiny_learner
+from helpers import ACTION, BATCH, batch, tiny_learner
 
 from hersd.config import ConfigError, SACConfig, TD3Config
 

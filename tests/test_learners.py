@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from conftest import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
+from helpers import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
 from hersd.compose import compose_train
 from hersd.config import LEARNERS as CONFIG_LEARNERS

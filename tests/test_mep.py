@@ -13,7 +13,7 @@ from hersd.config import MEPConfig
 from hersd.goal_envs import goal_reward
 from hersd.mep import EpisodePrioritizer, entropy, rank_priorities
 from hersd.replay import Episodes, sample_transitions
-from conftest import TIMING
+from helpers import TIMING
 from hersd.runlog import read_run
 from hersd.train import train
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import TINY, metrics
+from helpers import TINY, metrics
 from PIL import Image, ImageSequence
 
 import hersd.render

@@ -61,7 +61,7 @@ def test_a_busy_neighbour_is_seen_on_the_real_machine():
 
 
 def test_a_lone_run_on_a_busy_machine_takes_only_the_idle_cores(tmp_path, monkeypatch):
-    from conftest import TINY
+    from helpers import TINY
 
     from hersd.compose import compose_train
     from hersd.runlog import read_run

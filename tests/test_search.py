@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import optuna
 import pytest
-from conftest import TINY, run_command
+from helpers import TINY, run_command
 from optuna.trial import TrialState
 
 import hersd.train

@@ -1,0 +1,81 @@
+"""Plain values and functions the tests import (``from helpers import TINY, metrics``): tiny run configs, tiny
+learners and their batches, a run's metrics, a command in a fresh interpreter. Fixtures live in conftest.py."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from hersd.runlog import EPOCH_FIELDS, read_run
+
+# A run small enough for a unit test: FetchReach, 2 cycles of 5 updates on 64 transitions,
+# one test round, no policy animation (tests/test_render.py renders) and no bias evaluation
+# (tests/test_bias.py evaluates). Learning is not expected at this size; the code paths are all exercised.
+TINY = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
+        "ddpg.batch_size=64", "render_every=0", "bias.epochs=[]"]
+TIMING = [name for name in EPOCH_FIELDS if name.endswith("_seconds")]  # wall-clock fields: never compared
+
+# Learners small enough for unit tests of their update rules (tests/test_ddpg.py, test_learners.py,
+# test_learner_rules.py): 2 x 16 networks, obs/goal/action sizes 5/3/2, hand-made batches of 16, no env.
+OBS, GOAL, ACTION, BATCH = 5, 3, 2, 16
+
+
+def tiny_spec(max_action: float = 1.0):
+    """An EnvSpec of the tiny learners' sizes (a Fetch-like horizon and reward range)."""
+    from hersd.envs import EnvSpec
+
+    return EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=max_action,
+                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
+
+
+def tiny_learner(name: str = "ddpg", max_action: float = 1.0, seed: int = 0,
+                 q_range: tuple[float, float] = (-50.0, 0.0), ddpg: dict | None = None, **settings):
+    """Learner ``name`` built by its class from torch seed ``seed`` (gamma 0.98, target range ``q_range``), with
+    ``ddpg.*`` changes and its own settings (``learner.<name>.*``); its normalisers have seen 100 random rows."""
+    import numpy as np
+    import torch
+
+    from hersd.config import DDPGConfig, LearnerConfig, TrainConfig
+    from hersd.learners import learner_class
+
+    learner = LearnerConfig(name=name)
+    if settings:
+        setattr(learner, name, type(getattr(learner, name))(**settings))
+    cfg = TrainConfig(ddpg=DDPGConfig(hidden_layers=2, hidden_units=16, **(ddpg or {})), learner=learner)
+    torch.manual_seed(seed)
+    agent = learner_class(name).build(cfg, tiny_spec(max_action), 0.98, q_range, torch.device("cpu"))
+    rng = np.random.default_rng(0)
+    agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
+    return agent
+
+
+def batch(reward: float = -1.0, seed: int = 1):
+    """A TransitionBatch of BATCH random transitions with one reward, no relabelled row."""
+    import numpy as np
+
+    from hersd.replay import TransitionBatch
+
+    rng = np.random.default_rng(seed)
+    f32 = np.float32
+    return TransitionBatch(obs=rng.normal(size=(BATCH, OBS)).astype(f32),
+                           next_obs=rng.normal(size=(BATCH, OBS)).astype(f32), goal=rng.normal(size=(BATCH, GOAL)).astype(f32),
+                           action=rng.uniform(-1, 1, size=(BATCH, ACTION)).astype(f32),
+                           reward=np.full(BATCH, reward, f32), relabelled=np.zeros(BATCH, bool),
+                           real_success=np.zeros(BATCH, bool), episode=np.zeros(BATCH, int), t=np.zeros(BATCH, int))
+
+
+def metrics(log_path: Path) -> pd.DataFrame:
+    """Every logged metric of a run except wall-clock timings (one row per epoch)."""
+    return read_run(log_path).epochs.drop(columns=TIMING)
+
+
+def run_command(module_main: str, *args: str, check: bool = False, timeout: float = 600,
+                cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run a command's entry point (e.g. ``sweeps.launch:main``) in a fresh interpreter."""
+    module, function = module_main.split(":")
+    code = f"import sys; from {module} import {function}; sys.exit({function}())"
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=check,
+                          timeout=timeout, cwd=cwd)
