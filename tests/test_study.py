@@ -1,6 +1,6 @@
 """hersd/study.py, the study's contract: storage specs and their names, the trial parameters'
 encoding, the report command. (Opening storages: tests/test_search.py for writing,
-tests/test_analysis.py read-only.)"""
+tests/test_studies.py read-only.)"""
 
 from __future__ import annotations
 
