@@ -3,8 +3,10 @@ sweeps layer; the composition table; the study storages it draws."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -172,3 +174,20 @@ def test_the_run_list_says_each_state_in_words():
     assert run_state_words(complete=False, damaged=True, done=39, total=200) == (
         "in progress (epoch 39 of 200), log without a valid end")
     assert run_state_words(complete=True, damaged=True, done=200, total=200) == "complete, log without a valid end"
+
+
+def test_the_readme_opens_with_the_committed_reports_fetchpush_curves_and_their_numbers():
+    """README.md's first lines: an image of the committed report (results/report/) and the numbers of
+    tables/summary.csv behind it, for HER, the control, the linear decay and the success-driven rate."""
+    root = Path(__file__).resolve().parent.parent
+    top = (root / "README.md").read_text(encoding="utf-8").split("\nHindsight experience replay")[0]
+    (image,) = re.findall(r"\]\((results/report/figures/[^)]+\.png)\)", top)
+    assert (root / image).is_file()
+    summary = pd.read_csv(root / "results/report/tables/summary.csv").set_index("config").loc[
+        ["HER", "HER eps=0.874375", "linear b1=0.25", "success b1=0.25"]]
+    text = " ".join(top.split())
+    for config, row in summary.iterrows():
+        assert f"{row['epochs_to_0.9']:.0f} with" in text, config
+    assert "at epoch 200 " + ", ".join(f"{value:.3f}" for value in summary["final_median"][:3]) + " and " + (
+        f"{summary['final_median'].iloc[3]:.3f}") in text
+    assert f"({summary['seeds'].iloc[3]} seeds complete, {summary['in_progress'].iloc[3]} in progress)" in text
