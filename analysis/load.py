@@ -50,7 +50,7 @@ RUN_COLUMNS = (
     "mu_eps",         # the exact mean rate over the run's K (eq. 10 for eq. 9's kinds); the mean logged rate if adaptive
     "epochs_done",    # completed epochs in the log
     "complete",       # the log says the run finished
-    "damaged",        # the file has no valid end (killed or still running)
+    "damaged",        # the file has no valid end (cut short, or an earlier-format log of a killed or running writer)
     "run_id",         # 8-hex config hash written by training
     "cpu",            # the CPU the log was started on (metadata machine.cpu_model; empty in logs that predate it)
     "path",           # the log's path relative to the loaded folder
