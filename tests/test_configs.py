@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from hersd.compose import compose, compose_train, group_options
-from hersd.config import TrainConfig, config_record
+from hersd.config import TrainConfig
 from hersd.runlog import read_run
-from hersd.runstore import NOT_HASHED, config_hash, run_identity
+from hersd.runstore import config_hash
 from hersd.schedules import schedule_from_record
 from hersd.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
@@ -150,39 +150,10 @@ def test_the_paper_kinds_presets_keep_their_tags_and_records(preset):
         assert set(schedule.record()) == {"kind", "eps", "beta1", "beta2", "mean_rate", "window", "eps_min"}
 
 
-def test_a_config_and_its_logged_dict_have_one_identity_however_old_the_log():
-    cfg = compose_train(["task=push", "learner=td3", "schedule=paper_exp_050"])
-    assert run_identity(config_record(cfg)) == run_identity(cfg)
-    old = config_record(compose_train(["task=push"]))
-    for key in ("learner", "threads", "device"):  # fields added to the schema after runs were made
-        del old[key]
-    for key in ("window", "eps_min"):
-        del old["schedule"][key]
-    assert run_identity(old) == run_identity(compose_train(["task=push"]))
-
-
-def test_run_identity_ignores_where_and_how_a_run_is_executed():
-    base = compose_train(["task=push"])
-    for override in ("results_dir=/elsewhere", "quiet=true", "checkpoint_every=5", "keep_checkpoint=true",
-                     "threads=2", "device=cpu", "flush_denormal=true"):
-        assert config_hash(compose_train(["task=push", override])) == config_hash(base), override
-    assert not set(NOT_HASHED) & set(run_identity(base))
-    assert config_hash(compose_train(["task=push", "seed=1"])) != config_hash(base)
-
-
 def test_a_custom_task_is_named_by_its_env_id():
     cfg = compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"])
     assert (cfg.task.name, cfg.task.env_id, cfg.task.cycles_per_epoch) == ("HandManipulateEgg-v1",) * 2 + (50,)
     assert config_hash(cfg) == config_hash(compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"]))
-
-
-def test_only_the_learner_in_use_is_part_of_a_runs_identity():
-    ddpg = compose_train(["task=push"])
-    assert config_hash(compose_train(["task=push", "learner.td3.policy_delay=3"])) == config_hash(ddpg)
-    td3 = compose_train(["task=push", "learner=td3"])
-    assert config_hash(td3) != config_hash(ddpg)
-    assert config_hash(compose_train(["task=push", "learner=td3", "learner.sac.alpha_lr=0.1"])) == config_hash(td3)
-    assert config_hash(compose_train(["task=push", "learner=td3", "learner.td3.policy_delay=3"])) != config_hash(td3)
 
 
 def _leaves(node, path: tuple = ()) -> dict[tuple, object]:

@@ -1,4 +1,4 @@
-"""sweeps/status.py and the run lock's pid: what a sweep's dry run shows for each run."""
+"""sweeps/status.py: what a sweep's dry run shows for each run (the run lock and its holder's pid: tests/test_runstore.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from analysis.synthetic import write_run
 from hersd.config import TrainConfig
-from hersd.runstore import LOCK_NAME, RunFolder
+from hersd.runstore import RunFolder
 from sweeps.status import run_status
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
@@ -22,23 +22,6 @@ def write_log(directory: Path, epochs_done: int, complete: bool = False) -> Path
     """A synthetic 200-epoch run's log holding ``epochs_done`` epochs (45 s each)."""
     with mock.patch("os.fsync"):
         return write_run(directory, TrainConfig(epochs=200), np.linspace(0, 1, epochs_done), complete=complete)
-
-
-def test_the_lock_records_its_holders_pid_while_held(tmp_path):
-    assert RunFolder(tmp_path).holder() is None
-    with RunFolder(tmp_path).lock():
-        assert RunFolder(tmp_path).holder() == os.getpid()
-        code = f"from hersd.runstore import RunFolder; from pathlib import Path\nwith RunFolder(Path({str(tmp_path)!r})).lock(): pass"
-        taken = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-        assert f"being run by another process (pid {os.getpid()})" in taken.stderr  # and it kept the pid
-        assert RunFolder(tmp_path).holder() == os.getpid()
-    assert RunFolder(tmp_path).holder() is None and (tmp_path / LOCK_NAME).read_text() == ""
-
-
-def test_a_dead_holders_pid_is_no_holder(tmp_path):
-    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    (tmp_path / LOCK_NAME).write_text(ended.stdout)  # as a holder killed with -9 leaves it
-    assert RunFolder(tmp_path).holder() is None
 
 
 def test_each_state_with_its_progress(tmp_path):
