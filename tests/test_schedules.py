@@ -139,46 +139,6 @@ def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
         TrainConfig(schedule={"kind": "table", "from_run": str(tmp_path / "nowhere")}, epochs=4)
 
 
-def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
-    from hersd.config import TrainConfig
-    from hersd.schedules import known_kinds
-
-    (tmp_path / "steps.py").write_text(STEP_SOURCE)
-    dist = tmp_path / "steps-1.0.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: steps\nVersion: 1.0\n")
-    (dist / "entry_points.txt").write_text("[hersd.schedules]\nstep = steps:Step\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    assert "step" in known_kinds()
-    schedule = TrainConfig(schedule={"kind": "step", "low": 0.4}, epochs=4).schedule
-    assert list(schedule.epoch_rates(4)) == [0.9, 0.9, 0.4, 0.4] and schedule.record() == {"kind": "step", "high": 0.9, "low": 0.4}
-
-
-STEP_SOURCE = '''
-from dataclasses import dataclass
-
-from hersd.schedules import Schedule, param
-
-
-@dataclass
-class Step(Schedule):
-    kind = "step"
-    formula = "eps(k) = high for k <= K/2, low after"
-    searched = ("low",)
-
-    high: float = param(0.9, 0.0, 1.0, "the rate of the first half")
-    low: float = param(0.5, 0.0, 1.0, "the rate of the second half")
-
-    def rate(self, k, total_epochs, train_success=()):
-        return self.high if 2 * k <= total_epochs else self.low
-
-    def tag(self):
-        return f"step-{self.high:g}_{self.low:g}"
-
-    def label(self):
-        return f"step {self.high:g}->{self.low:g}"
-'''
-
 # Strings equal to a kind's name that are not that kind: the env's info key and a column of success rates.
 NOT_KINDS = {("hersd/envs.py", "success"), ("hersd/render.py", "success"), ("analysis/metrics.py", "success")}
 

@@ -1,0 +1,95 @@
+"""A schedule of the user's own, in a module outside hersd: by its class path (Hydra's ``_target_``
+convention) through training, a sweep, a search and the report, each a fresh process with the module
+on PYTHONPATH; and by an entry point of the group ``hersd.schedules``."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from helpers import TINY
+
+from hersd.runlog import read_run
+
+# A user's module: Step declares no kind, so it is selected and recorded by its path; RegisteredStep is
+# the same schedule under the name an entry point gives it.
+STEPS = '''
+from dataclasses import dataclass
+
+from hersd.schedules import Schedule, param
+
+
+@dataclass
+class Step(Schedule):
+    formula = "eps(k) = high for k <= K/2, low after"
+    searched = ("low",)
+
+    high: float = param(0.9, 0.0, 1.0, "the rate of the first half")
+    low: float = param(0.5, 0.0, 1.0, "the rate of the second half")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.high if 2 * k <= total_epochs else self.low
+
+    def tag(self):
+        return f"step-{self.high:g}_{self.low:g}"
+
+    def label(self):
+        return f"step {self.high:g}->{self.low:g}"
+
+
+@dataclass
+class RegisteredStep(Step):
+    kind = "step"
+'''
+
+
+def command(module_main: str, args: list[str], module_dir: Path) -> subprocess.CompletedProcess:
+    """A command's entry point in a fresh interpreter with ``module_dir`` on PYTHONPATH."""
+    module, function = module_main.split(":")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(module_dir), os.environ.get("PYTHONPATH", "")])}
+    code = f"import sys; from {module} import {function}; sys.exit({function}())"
+    result = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=600, env=env)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    return result
+
+
+def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(tmp_path):
+    (tmp_path / "user_steps.py").write_text(STEPS)
+    results = tmp_path / "results"
+    run = [*TINY, "epochs=2", f"results_dir={results}", "schedule._target_=user_steps.Step"]
+    trained = command("hersd.cli:main", [*run, "schedule.low=0.4", "quiet=true", "threads=1"], tmp_path)
+    log = read_run(Path(trained.stdout.strip().splitlines()[-1]))
+    assert Path(trained.stdout.strip()).parent.parent.name == "step-0.9_0.4"
+    assert log.meta["config"]["schedule"] == {"kind": "user_steps.Step", "high": 0.9, "low": 0.4}
+    assert list(log.epochs["relabel_rate"]) == [0.9, 0.4]
+
+    swept = command("sweeps.launch:main", [*run, "seeds=1", "schedule.low=0.3,0.6", "hydra.launcher.n_jobs=1"], tmp_path)
+    assert "sweep finished: 2 done" in swept.stdout
+    assert (results / "reach" / "her" / "step-0.9_0.3").is_dir() and (results / "reach" / "her" / "step-0.9_0.6").is_dir()
+
+    searched = command("sweeps.search.cli:main", [*TINY, "epochs=2", f"results_dir={results}", "search.n_trials=2",
+                                                  "search.space.kinds=[user_steps.Step]", "search.enqueue=[]"], tmp_path)
+    assert "trials: 2 complete" in searched.stdout
+    assert len([path for path in (results / "reach" / "her").iterdir() if path.name.startswith("step-")]) == 5
+
+    command("analysis.report:main", [str(results)], tmp_path)
+    summary = (results / "report" / "tables" / "summary.md").read_text()
+    assert all(f"step 0.9->{low:g}" in summary for low in (0.4, 0.3, 0.6))
+
+
+def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
+    from hersd.config import TrainConfig
+    from hersd.schedules import known_kinds
+
+    (tmp_path / "user_steps.py").write_text(STEPS)
+    dist = tmp_path / "user_steps-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: user-steps\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[hersd.schedules]\nstep = user_steps:RegisteredStep\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert "step" in known_kinds()
+    schedule = TrainConfig(schedule={"kind": "step", "low": 0.4}, epochs=4).schedule
+    assert list(schedule.epoch_rates(4)) == [0.9, 0.9, 0.4, 0.4]
+    assert schedule.record() == {"kind": "step", "high": 0.9, "low": 0.4}
