@@ -71,6 +71,19 @@ COLUMNS: dict[str, Column] = {
     "final": Column("test success at its last epoch (smoothed)", SHARE),
     "seconds_per_epoch": Column("seconds per epoch (median)", "{:.1f}"),
     "cpu": Column("CPU"),
+    # a study's best trials (analysis.search_figures): numbers at the table's 4 significant digits
+    "trial": Column("trial"),
+    "value": Column("objective value"),
+    "kind": Column("schedule"),
+    "beta1": Column("β1"),
+    "beta2": Column("β2"),
+    "eps": Column("ε"),
+    "lambda_h": Column("λh"),
+    "mu_eps": Column("μ_ε over the epochs (eq. 10)"),
+    "mu_eps_approx": Column("μ_ε by eq. 11"),
+    "in_band": Column("μ_ε in HER's best band"),
+    "retry_of": Column("retry of trial"),
+    "duration_s": Column("seconds"),
 }
 RUN_COLUMNS: dict[str, Column] = {  # the run list: a run's own curve, not a median
     **COLUMNS, **{f"{prefix}epochs_to_{threshold}": _reach(threshold, curve)

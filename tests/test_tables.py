@@ -21,8 +21,9 @@ def test_page_headers_are_words_with_units_and_the_files_keep_the_column_names()
     assert column_header("epochs_to_0.5") == "epochs to 0.5 success (median, smoothed)"
     assert column_header("raw_epochs_to_0.9", columns=RUN_COLUMNS) == "epochs to 0.9 success (raw)"  # one run's own
     assert column_header("seconds_per_epoch") == "seconds per epoch (median)"
-    assert column_header("mu_eps_approx") == "mu eps approx"  # not in COLUMNS: its name, spaced
-    assert all("_" not in column.label for column in COLUMNS.values())
+    assert column_header("mu_eps_approx") == "μ_ε by eq. 11"
+    assert column_header("share_of_something") == "share of something"  # not in COLUMNS: its name, spaced
+    assert all("_" not in column.label.replace("μ_ε", "") for column in COLUMNS.values())
     table = pd.DataFrame({"config": ["HER"], "final_median": [0.98]})
     assert markdown_table(table).startswith("| config | final_median |")  # the .md files: the names
     assert "<th class=text>configuration</th><th>test success at epoch 200, median over seeds</th>" in html_table(
