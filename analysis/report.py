@@ -54,8 +54,6 @@ DPI = 100
 FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
 MIME = {"png": "image/png", "svg": "image/svg+xml"}
 PAGE_TEST_ROWS = 60  # more permutation tests than this stay in their table files
-RUN_LIST_COLUMNS = ["path", "task", "config", "seed", "state", "epochs_done", "total_epochs", *RUN_OUTCOME_COLUMNS,
-                    "cpu", "damaged", "run_id"]
 # the page's run list, one table per task x configuration (its <details> summary names them)
 RUN_PAGE_COLUMNS = ["run_folder", "seed", "state", *RUN_OUTCOME_COLUMNS, "seconds_per_epoch", "cpu"]
 TABLE_NOTES = {
@@ -291,10 +289,9 @@ def _titled(table: pd.DataFrame) -> pd.DataFrame:
 
 def _common_epochs(table: pd.DataFrame, runs: pd.DataFrame) -> int | None:
     """The number of epochs K of every complete run of the table's (task, configuration) rows; None if they differ."""
-    keys = table[["task", "config"]].astype(str).apply(tuple, axis=1)
-    complete = runs[runs["complete"]]
-    epochs = complete.loc[complete[["task", "config"]].astype(str).apply(tuple, axis=1).isin(set(keys)),
-                          "total_epochs"].unique()
+    keys = table[["task", "config"]].astype(str)
+    complete = runs.loc[runs["complete"], ["task", "config", "total_epochs"]].astype({"config": str})
+    epochs = complete.merge(keys, on=["task", "config"])["total_epochs"].unique()
     return int(epochs[0]) if len(epochs) == 1 else None
 
 

@@ -191,3 +191,15 @@ def test_the_readme_opens_with_the_committed_reports_fetchpush_curves_and_their_
     assert "at epoch 200 " + ", ".join(f"{value:.3f}" for value in summary["final_median"][:3]) + " and " + (
         f"{summary['final_median'].iloc[3]:.3f}") in text
     assert f"({summary['seeds'].iloc[3]} seeds complete, {summary['in_progress'].iloc[3]} in progress)" in text
+
+
+def test_the_summary_header_names_the_epoch_of_final_success_when_the_rows_share_it(tmp_path):
+    for task, epochs in (("push", 6), ("reach", 4)):
+        write_run(tmp_path / "logs" / task, make_config(task, epochs=epochs), np.linspace(0, 1, epochs))
+    pages = {}
+    for name, tasks in (("push", ["push"]), ("both", ["push", "reach"])):
+        assert report_main([str(tmp_path / "logs"), "--out", str(tmp_path / name), "--task", *tasks]) == 0
+        pages[name] = (tmp_path / name / "index.html").read_text(encoding="utf-8")
+    assert "<th>test success at epoch 6, median over seeds</th>" in pages["push"]
+    assert "<th>test success at epoch K, median over seeds</th>" in pages["both"]  # FetchReach ran 4 epochs
+    assert "<td class=text>FetchPush</td>" in pages["both"] and "<td class=text>FetchReach</td>" in pages["both"]
