@@ -61,7 +61,7 @@ TABLE_NOTES = {
                 "other table: <b>complete seeds</b> counts them, <b>runs in progress</b> the runs left out (not "
                 "complete: running or stopped; they are drawn on their own in the learning curves). "
                 "<b>Test success at epoch K</b>: median over seeds of each seed's test success at its last epoch "
-                "K, smoothed (a moving average, below). "
+                "K, smoothed (the moving average of the first line). "
                 "<b>Area under the median curve</b>: mean over epochs 1..K of the median smoothed curve "
                 "(normalised to [0, 1]). "
                 "<b>Epochs to 0.5 / 0.9 success</b>: first epoch the median smoothed curve (or the median of the "
