@@ -106,7 +106,7 @@ def test_an_unfinished_log_with_more_epochs_is_kept_until_a_restarted_run_passes
 def test_logs_of_the_earlier_format_land_in_the_current_one_with_every_message_identical(tmp_path, repo):
     """A campaign run by an older hersd: its logs (complete, and running: no footer) land chunked and indexed."""
     from mcap.reader import make_reader
-    from test_mcap_readers import write_old_format
+    from runlogs import write_old_format
 
     campaign, results = tmp_path / "campaign", repo / "results"
     for run, complete in ((DONE, True), (RUNNING, False)):
