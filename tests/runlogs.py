@@ -26,9 +26,11 @@ def epoch_record(epoch: int) -> dict:
     return record
 
 
-def write_old_format(path: Path, epochs: int, complete: bool, sessions: int = 1) -> None:
+def write_old_format(path: Path, epochs: int, complete: bool, sessions: int = 1,
+                     messages: list[tuple[str, int, dict]] | None = None) -> None:
     """A log as hersd wrote it before this format: unchunked, nullable types, nulls stored, every message
-    flushed, no footer while running (``complete=False``: the writer was killed)."""
+    flushed, no footer while running (``complete=False``: the writer was killed). ``messages``
+    ((topic, log_time, payload) each, e.g. a real run's) replace the made-up ones."""
     nullable = {"title": "hersd.Epoch", "type": "object", "properties": {
         name: {"type": [kind, "null"] if name in OPTIONAL_EPOCH_FIELDS else kind} for name, (kind, _) in
         EPOCH_FIELDS.items()}}
@@ -43,8 +45,11 @@ def write_old_format(path: Path, epochs: int, complete: bool, sessions: int = 1)
     payloads = [("/run/meta", {**META, "resumed_from_epoch": 2 * s}) for s in range(sessions)]
     payloads += [("/epoch", {name: epoch_record(k).get(name) for name in EPOCH_FIELDS}) for k in range(1, epochs + 1)]
     payloads += [("/run/status", {"status": "complete", "epochs": epochs, "end_time": "x"})] if complete else []
-    for sequence, (topic, payload) in enumerate(payloads, start=1):
-        writer.add_message(channel_id=channels[topic], log_time=1_000 * sequence, publish_time=1_000 * sequence,
+    timed = [(topic, 1_000 * sequence, payload) for sequence, (topic, payload) in enumerate(payloads, start=1)]
+    for sequence, (topic, log_time, payload) in enumerate(timed if messages is None else messages, start=1):
+        if topic == "/epoch":
+            payload = {name: payload.get(name) for name in EPOCH_FIELDS}  # nulls stored, as then
+        writer.add_message(channel_id=channels[topic], log_time=log_time, publish_time=log_time,
                            sequence=sequence, data=json.dumps(payload).encode())
     stream.flush()
     if complete:

@@ -264,3 +264,39 @@ def test_a_resume_keeps_the_log_times_of_earlier_epochs(tmp_path):
     after = messages_as_stored(path)
     assert after[:3] == first[:3] and after[3][0] == "/run/meta" and after[4][1] > first[3][1]
     assert [record["epoch"] for record in read_records(path).records] == [1, 2, 3]
+
+
+class StopHere(Exception):
+    pass
+
+
+def test_a_run_stopped_under_the_earlier_format_resumes_into_the_current_one(tmp_path):
+    """A training run whose log is in the earlier format (killed: no footer) resumes with the current hersd:
+    the log becomes the current format with every earlier message identical in content and times."""
+    from hersd.compose import compose_train
+    from hersd.train import train
+
+    args = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
+            "ddpg.batch_size=64", "epochs=3", "quiet=true", "threads=1", "render_every=0", "bias.epochs=[]",
+            f"results_dir={tmp_path}"]
+
+    def stop(record):
+        if record["epoch"] == 2:
+            raise StopHere
+
+    with pytest.raises(StopHere):
+        train(compose_train(args), on_epoch=stop)
+    path = next(tmp_path.rglob("run.mcap"))
+    stored = read_records(path).messages
+    write_old_format(path, 0, complete=False, messages=[(m.topic, m.log_time, m.payload) for m in stored])
+    before = read_records(path)
+    assert before.damaged and len(before.records) == 2
+    assert train(compose_train(args)) == path
+    after = read_records(path)
+    assert after.complete and not after.damaged and [r["epoch"] for r in after.records] == [1, 2, 3]
+    assert [(m.topic, m.log_time, m.payload) for m in after.messages[:3]] == [
+        (m.topic, m.log_time, m.payload) for m in before.messages]
+    assert after.records[:2] == before.records and after.sessions[1]["resumed_from_epoch"] == 2
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        assert reader.get_header().library == LIBRARY and reader.get_summary().statistics.message_count == 6
