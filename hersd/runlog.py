@@ -19,7 +19,7 @@ The file is chunked (one message per chunk, uncompressed) with a chunk index, st
 summary. After every message the writer rewrites the whole log to ``run.mcap.tmp`` next to it,
 fsyncs it and renames it over ``run.mcap``: the file on disk is at every moment a complete,
 indexed MCAP file holding every completed epoch, so a killed or still-running run opens in any
-reader (``mcap cat``, Foxglove, ``mcap.reader.make_reader``, ``@mcap/core``'s indexed reader).
+reader (``mcap.reader.make_reader``, ``@mcap/core``'s indexed and streaming readers; Foxglove's schema types).
 A resumed run's log keeps its earlier messages with their original log times. :func:`read_records`
 also reads logs in the earlier format (unchunked, nullable types, no footer while a run was
 running), keeping every epoch before a damage; :func:`rewritten` turns one into the current format.
