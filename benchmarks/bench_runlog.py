@@ -97,8 +97,8 @@ def main() -> None:
         size = (folder / "run.mcap").stat().st_size
     finally:
         shutil.rmtree(folder)
-    print(f"{len(records)} epochs from {args.log.relative_to(REPOSITORY) if args.log.is_relative_to(REPOSITORY) else args.log}"
-          f", written in {folder.parent} (median of {args.repeats} runs)")
+    shown = args.log.relative_to(REPOSITORY) if args.log.is_relative_to(REPOSITORY) else args.log
+    print(f"{len(records)} epochs from {shown}, written in {folder.parent} (median of {args.repeats} runs)")
     print(f"{'epoch':>6} {'current ms':>11} {'earlier ms':>11}")
     for epoch in (1, 50, 100, 150, 200):
         if epoch <= len(records):

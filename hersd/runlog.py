@@ -18,8 +18,9 @@ nulls are settings: "unset").
 The file is chunked (one message per chunk, uncompressed) with a chunk index, statistics and
 summary. After every message the writer rewrites the whole log to ``run.mcap.tmp`` next to it,
 fsyncs it and renames it over ``run.mcap``: the file on disk is at every moment a complete,
-indexed MCAP file holding every completed epoch, so a killed or still-running run opens in any
-reader (``mcap.reader.make_reader``, ``@mcap/core``'s indexed and streaming readers; Foxglove's schema types).
+indexed MCAP file holding every completed epoch, so a killed or still-running run opens in
+readers that need the summary and index as in streaming ones (tested: ``mcap.reader.make_reader``,
+``@mcap/core``'s indexed and streaming readers; the schemas use only types Foxglove accepts).
 A resumed run's log keeps its earlier messages with their original log times. :func:`read_records`
 also reads logs in the earlier format (unchunked, nullable types, no footer while a run was
 running), keeping every epoch before a damage; :func:`rewritten` turns one into the current format.
@@ -89,7 +90,8 @@ EPOCH_FIELDS: dict[str, tuple[str, str]] = {
                                ("return", "mean", "mean discounted return the policy obtains for g"))},
     "bias_seconds": ("number", "seconds spent on the bias evaluation this epoch (absent at epochs without one)"),
 }
-# Fields a record may lack (absent from the message; read back as None): MEP's, SAC's, and those added after logs were first written.
+# Fields a record may lack (absent from the message; read back as None): MEP's, SAC's, and those added
+# after logs were first written.
 OPTIONAL_EPOCH_FIELDS = tuple(name for name in EPOCH_FIELDS if name not in (
     "epoch", "relabel_rate", "test_success", "train_success", "q_mean", "q_std", "critic_loss", "actor_loss",
     "share_hindsight", "share_real_success", "share_real_failure", "env_steps", "updates", "episodes_stored",
@@ -293,7 +295,8 @@ def _carried_over(previous: "RunLog") -> list[LoggedMessage]:
             if message.topic == "/epoch"}
     return [message for index, message in enumerate(previous.messages)
             if message.topic == "/run/meta"
-            or (message.topic == "/epoch" and message.payload["epoch"] in kept and last[message.payload["epoch"]] == index)]
+            or (message.topic == "/epoch" and message.payload["epoch"] in kept
+                and last[message.payload["epoch"]] == index)]
 
 
 @dataclass
