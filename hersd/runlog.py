@@ -19,7 +19,7 @@ The file is chunked (one message per chunk, uncompressed) with a chunk index, st
 summary. After every message the writer rewrites the whole log to ``run.mcap.tmp`` next to it,
 fsyncs it and renames it over ``run.mcap``: the file on disk is at every moment a complete,
 indexed MCAP file holding every completed epoch, so a killed or still-running run opens in
-readers that need the summary and index as in streaming ones (tested: ``mcap.reader.make_reader``,
+readers that need the summary and index as well as in streaming ones (tested: ``mcap.reader.make_reader``,
 ``@mcap/core``'s indexed and streaming readers; the schemas use only types Foxglove accepts).
 A resumed run's log keeps its earlier messages with their original log times. :func:`read_records`
 also reads logs in the earlier format (unchunked, nullable types, no footer while a run was
