@@ -64,7 +64,8 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
 @pytest.mark.parametrize("args, expected", [
     (["+grid=nope"], "Available options in 'grid'"),
     (["task=cartpole"], "Available options in 'task'"),
-    (["+grid=smoke", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
+    (["+grid=beta", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
+    (["+grid=smoke", "schedule.beta1=0.5"], "schedule.beta1 is not a setting of schedule constant; its settings: eps"),
     (["+grid=smoke", "no_such_key=1"], "seed, epochs"),
     (["+grid=smoke", "seeds=0"], "seeds must be >= 1, got 0"),
 ])
