@@ -140,7 +140,7 @@ def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
 
 
 # Strings equal to a kind's name that are not that kind: the env's info key and a column of success rates.
-NOT_KINDS = {("hersd/envs.py", "success"), ("hersd/render.py", "success"), ("analysis/metrics.py", "success")}
+NOT_KINDS = {("hersd/envs/make.py", "success"), ("hersd/render.py", "success"), ("analysis/metrics.py", "success")}
 
 
 def test_kind_names_are_literals_only_in_their_own_schedule_file():
@@ -160,3 +160,18 @@ def test_kind_names_are_literals_only_in_their_own_schedule_file():
                         and name != f"hersd/schedules/{node.value}.py":
                     found.append(f"{name}:{node.lineno} {node.value!r}")
     assert not found
+
+
+def test_a_table_replaying_a_success_runs_log_computes_that_run_again(tmp_path):
+    """The one-line control: the rates a success-driven run realised, replayed as a function of the epoch,
+    give the same run (same seed) epoch for epoch, in a folder of its own."""
+    from helpers import TINY, metrics
+
+    from hersd.compose import compose_train
+    from hersd.train import train
+
+    args = [*TINY, "quiet=true", "threads=1", "epochs=3", "task.distance_threshold=0.15", f"results_dir={tmp_path}"]
+    adaptive = train(compose_train([*args, "schedule=success", "schedule.beta1=0.9", "schedule.window=1"]))
+    replay = train(compose_train([*args, "schedule=table", f"schedule.from_run={adaptive.parent}"]))
+    assert replay.parent.parent.name.startswith("table-") and replay.parent != adaptive.parent
+    assert metrics(replay).equals(metrics(adaptive))
