@@ -95,8 +95,9 @@ class Schedule:
 
 
 def kind_name(cls: type[Schedule]) -> str:
-    """The kind a schedule class is recorded under: its ``kind``, else its import path."""
-    return cls.kind or f"{cls.__module__}.{cls.__qualname__}"
+    """The kind a schedule class is recorded under: the ``kind`` it declares itself (not one it inherits, so a
+    subclass of a registered kind is not taken for it), else its import path."""
+    return cls.__dict__.get("kind") or f"{cls.__module__}.{cls.__qualname__}"
 
 
 def check_param(item: dataclasses.Field, value: Any) -> None:
