@@ -37,9 +37,10 @@ from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, registered  # noqa: E402
+from hersd.config import ConfigError  # noqa: E402
+from hersd.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
-from hersd.study import (PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
+from hersd.study import (KIND_ATTR, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
                          StudyStorageError, kind_params, mean_rates, schedule_config, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
@@ -47,6 +48,14 @@ DEFAULT_BETA2_RANGE = (-2.0, 2.0)
 PLANE_KINDS = tuple(kind for kind in known_kinds() if "beta1" in kind_params(kind))  # eq. 9 decays
 COLUMNS = ["trial", "state", "value", *PARAM_NAMES, "mu_eps", "mu_eps_approx", "in_band", "last_step", "retry_of",
            "duration_s", "run_dirs"]
+
+
+def schedule_known(kind: str | None) -> bool:
+    """Whether a trial's kind names a schedule class this process can import (a user's module may be missing)."""
+    try:
+        return kind is not None and schedule_class(kind) is not None
+    except ConfigError:
+        return False
 
 
 def trials_frame(study: optuna.Study) -> pd.DataFrame:
@@ -57,7 +66,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
     for trial in study.get_trials(deepcopy=False):
         if trial.state == TrialState.WAITING:
             continue
-        params = trial_params(trial.params)
+        params = trial_params(trial.params, trial.user_attrs.get(KIND_ATTR))
         kind = params["kind"]
         decays = kind in PLANE_KINDS
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
@@ -67,7 +76,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
                "retry_of": trial.user_attrs.get(RETRY_OF_ATTR),
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
                "run_dirs": ";".join(trial.user_attrs.get(RUN_DIRS_ATTR, []))}
-        if kind is not None and registered(kind) is not None and set(kind_params(kind)) <= set(params):
+        if schedule_known(kind) and set(kind_params(kind)) <= set(params):
             exact, approx = mean_rates(params, epochs or 1)
             row.update(mu_eps=exact if epochs else np.nan, mu_eps_approx=approx,
                        in_band=MU_EPS_BAND[0] <= approx <= MU_EPS_BAND[1])

@@ -48,6 +48,7 @@ SETTINGS_ATTR = "settings"  # study: StudySettings as a dict, set when the study
 TRAIN_OVERRIDES_ATTR = "train_overrides"  # study: the search command's training overrides
 RUN_DIRS_ATTR = "run_dirs"  # trial: its runs' directories, one per seed, set as each run starts
 RETRY_OF_ATTR = "retry_of"  # trial: the number of the lost or interrupted trial whose parameters it retries
+KIND_ATTR = "kind"  # trial: its schedule's kind (Optuna's parameters hold it only when several kinds are searched)
 
 
 class StudyStorageError(ConfigError):
@@ -168,13 +169,13 @@ def stored_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
     return dict(params) if len(kinds) > 1 else {name: value for name, value in params.items() if name != "kind"}
 
 
-def trial_params(stored: dict[str, Any]) -> dict[str, Any]:
-    """A trial's parameters as Optuna stored them -> with ``kind``: stored, else the registered kind whose
-    searched parameters they are (None if none fits)."""
+def trial_params(stored: dict[str, Any], kind: str | None = None) -> dict[str, Any]:
+    """A trial's parameters as Optuna stored them -> with ``kind``: stored, else ``kind`` (the trial's KIND_ATTR),
+    else the registered kind whose searched parameters they are (None if none fits: trials of earlier searches)."""
     if "kind" in stored:
         return dict(stored)
     names = set(stored) - {"lambda_h"}
-    kind = next((kind for kind in known_kinds() if set(kind_params(kind)) == names), None)
+    kind = kind or next((kind for kind in known_kinds() if set(kind_params(kind)) == names), None)
     return {"kind": kind, **stored}
 
 

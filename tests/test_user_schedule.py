@@ -77,6 +77,8 @@ def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(t
     command("analysis.report:main", [str(results)], tmp_path)
     summary = (results / "report" / "tables" / "summary.md").read_text()
     assert all(f"step 0.9->{low:g}" in summary for low in (0.4, 0.3, 0.6))
+    (trials,) = (results / "report" / "search").glob("*_best_trials.csv")
+    assert trials.read_text().count("user_steps.Step") == 2  # the study's trials know their kind
 
 
 def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):

@@ -22,7 +22,7 @@ import optuna
 from hersd.config import ConfigError, TrainConfig
 from hersd.runlog import LOG_NAME, read_records
 from hersd.runstore import run_dir
-from hersd.study import RUN_DIRS_ATTR, kind_params, mean_rates, param_overrides, trial_config
+from hersd.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, mean_rates, param_overrides, trial_config
 from sweeps.search.config import SpaceConfig, space_bounds
 from sweeps.search.plan import SearchPlan
 
@@ -134,6 +134,7 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     _heartbeat(trial)
     params = suggest_params(trial, plan.search.space)
+    trial.set_user_attr(KIND_ATTR, params["kind"])
     mu_exact, mu_approx = mean_rates(params, plan.epochs)
     trial.set_user_attr("mu_eps", mu_exact)
     trial.set_user_attr("mu_eps_approx", mu_approx)
