@@ -19,7 +19,7 @@ import pandas as pd
 
 from analysis.metrics import Analysis, final_success
 from hersd.runstore import RunFolder
-from hersd.tasks import task_title
+from hersd.envs.tasks import task_title
 
 FOLDER = "animations"  # below the report's figures/ folder
 MAX_EPOCHS_SHOWN = 4  # rows of a task's block: the paper's 200 epochs rendered every 50 give 50, 100, 150, 200

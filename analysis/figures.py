@@ -30,7 +30,7 @@ from analysis.critic import critic_curves  # noqa: E402
 from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 from hersd.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
-from hersd.tasks import task_rank, task_title  # noqa: E402
+from hersd.envs.tasks import task_rank, task_title  # noqa: E402
 
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
@@ -63,7 +63,7 @@ class ReportFigure:
 
 
 def ordered_tasks(tasks) -> list[str]:
-    """Tasks in the order of hersd.tasks.TASKS (the paper's first), others after, alphabetically."""
+    """Tasks in the order of hersd.envs.tasks.TASKS (the paper's first), others after, alphabetically."""
     return sorted(set(tasks), key=task_rank)
 
 

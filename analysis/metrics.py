@@ -24,7 +24,7 @@ import pandas as pd
 
 from analysis.load import HER_EPS, HER_WEIGHTS
 from hersd.schedules import decay_rate, mean_rate_approx, schedule_from_record, schedule_rank
-from hersd.tasks import task_rank
+from hersd.envs.tasks import task_rank
 
 GROUP = ["task", "config"]
 SUCCESS_THRESHOLDS = (0.5, 0.9)

@@ -41,7 +41,7 @@ from analysis.studies import StudyStorage, open_study_storage
 from hersd.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.workers import ForkedMap
-from hersd.tasks import task_rank, task_title
+from hersd.envs.tasks import task_rank, task_title
 
 if TYPE_CHECKING:
     from analysis.figures import ReportFigure

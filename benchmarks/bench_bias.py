@@ -20,7 +20,7 @@ import torch
 
 from hersd.bias import BiasEvaluator
 from hersd.compose import compose_train
-from hersd.envs import make_env
+from hersd.envs.make import make_env
 from hersd.run_state import RunState
 from hersd.train import run_epoch
 

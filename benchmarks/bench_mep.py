@@ -32,8 +32,8 @@ import numpy as np
 import torch
 
 from hersd.compose import compose_train as compose
-from hersd.envs import make_env
-from hersd.replay import EpisodeBuffer, Episodes
+from hersd.envs.make import make_env
+from hersd.replay.buffer import EpisodeBuffer, Episodes
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.runlog import read_run
 from hersd.runstore import CHECKPOINT_NAME

@@ -35,7 +35,7 @@ import numpy as np
 
 from hersd.config import BiasConfig, TaskConfig
 from hersd.denormals import denormals_flushed
-from hersd.envs import make_env
+from hersd.envs.make import make_env
 
 BIAS_SALT = 0x62696173  # keeps the evaluation's stream apart from any other stream of the run's seed
 GOAL_TYPES = ("real", "hindsight")

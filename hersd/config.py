@@ -19,7 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from hersd.errors import ConfigError
 from hersd.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config
-from hersd.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
+from hersd.envs.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
@@ -62,7 +62,7 @@ def _check_number(name: str, value: float, low: float, high: float, low_open: bo
 
 @dataclass
 class TaskConfig:
-    name: str = "push"  # a task of hersd/tasks.py (reach, push, ... hand_block), or custom (with task.env_id)
+    name: str = "push"  # a task of hersd/envs/tasks.py (reach, push, ... hand_block), or custom (with task.env_id)
     env_id: Optional[str] = None  # gymnasium-robotics env id; null: the task's; task=custom: any goal-conditioned env
     cycles_per_epoch: Optional[int] = None  # rollout+update cycles per epoch; null: the task's (50; FetchReach 10)
     # Success radius in metres; null keeps the env's own (0.05 m for every v4 Fetch task).
@@ -99,7 +99,7 @@ class TaskConfig:
 
 @dataclass
 class MEPConfig:
-    # MEP (Zhao et al. 2019; hersd/mep.py, docs/MEP.md): from epoch 2 on, episodes are drawn by the
+    # MEP (Zhao et al. 2019; hersd/replay/mep.py, docs/MEP.md): from epoch 2 on, episodes are drawn by the
     # rarity of their achieved-goal trajectory under a density model refit once per epoch.
     enabled: bool = False  # sample episodes by trajectory rarity instead of uniformly
     temperature: float = 1.0  # p ~ rank(rarity) ** (1 / temperature), rank 1 = most common; larger is flatter

@@ -31,7 +31,7 @@ from PIL import Image
 from hersd.config import ConfigError, TaskConfig, TrainConfig, to_train_config
 from hersd.denormals import denormals_flushed, set_intra_op_threads
 from hersd.learners import GoalConditionedLearner
-from hersd.envs import env_spec, make_env, step_success
+from hersd.envs.make import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run
 from hersd.runstore import CHECKPOINT_NAME, RunFolder

@@ -16,11 +16,11 @@ import numpy as np
 import torch
 
 from hersd.config import ConfigError, TrainConfig
-from hersd.envs import EnvSpec, check_success_reported, env_spec, make_env
-from hersd.goal_envs import vectorised_reward
+from hersd.envs.make import EnvSpec, check_success_reported, env_spec, make_env
+from hersd.envs.goal_envs import vectorised_reward
 from hersd.learners import GoalConditionedLearner, learner_class
-from hersd.mep import EpisodePrioritizer
-from hersd.replay import EpisodeBuffer
+from hersd.replay.mep import EpisodePrioritizer
+from hersd.replay.buffer import EpisodeBuffer
 from hersd.resources import available_memory_bytes
 
 
@@ -52,7 +52,7 @@ class RunState:
         self.gamma, self.q_range = discounting(cfg, spec)
         self.agent = make_agent(cfg, spec, self.gamma, self.q_range, device)
         self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
-        # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/mep.py).
+        # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/replay/mep.py).
         self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
         self.epochs_done = self.env_steps = self.updates = 0
         self.train_success: list[float] = []

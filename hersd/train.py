@@ -26,8 +26,8 @@ from hersd.bias import GOAL_TYPES, BiasEvaluator
 from hersd.config import TrainConfig, config_record
 from hersd.denormals import denormals_flushed, set_intra_op_threads, thread_flush_states
 from hersd.learners import GoalConditionedLearner, UpdateStats, learner_class
-from hersd.envs import step_success
-from hersd.replay import Episodes, TransitionBatch, sample_transitions
+from hersd.envs.make import step_success
+from hersd.replay.buffer import Episodes, TransitionBatch, sample_transitions
 from hersd.render import RenderError, render_policy, renders_at
 from hersd.resources import machine_info, resolve_device, resolve_threads
 from hersd.run_state import RunState, load_checkpoint, save_checkpoint

@@ -25,7 +25,7 @@ OBS, GOAL, ACTION, BATCH = 5, 3, 2, 16
 
 def tiny_spec(max_action: float = 1.0):
     """An EnvSpec of the tiny learners' sizes (a Fetch-like horizon and reward range)."""
-    from hersd.envs import EnvSpec
+    from hersd.envs.make import EnvSpec
 
     return EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=max_action,
                    distance_threshold=0.05, reward_range=(-1.0, 0.0))
@@ -56,7 +56,7 @@ def batch(reward: float = -1.0, seed: int = 1):
     """A TransitionBatch of BATCH random transitions with one reward, no relabelled row."""
     import numpy as np
 
-    from hersd.replay import TransitionBatch
+    from hersd.replay.buffer import TransitionBatch
 
     rng = np.random.default_rng(seed)
     f32 = np.float32

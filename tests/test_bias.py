@@ -8,8 +8,8 @@ from helpers import TINY, metrics
 
 from hersd.bias import BiasEvaluator, discounted_returns
 from hersd.compose import compose_train
-from hersd.envs import env_spec, make_env
-from hersd.goal_envs import vectorised_reward
+from hersd.envs.make import env_spec, make_env
+from hersd.envs.goal_envs import vectorised_reward
 from hersd.runlog import read_run
 from hersd.train import train
 

@@ -19,7 +19,7 @@ from hersd.cli import main
 from hersd.compose import compose_train
 from hersd.config import (AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
                           TD3Config, TrainConfig)
-from hersd.envs import EnvSpec
+from hersd.envs.make import EnvSpec
 from hersd.runlog import read_run
 from hersd.runstore import CHECKPOINT_NAME
 from hersd.schedules import SCHEDULES

@@ -13,7 +13,7 @@ from hersd.config import TrainConfig
 from hersd.runlog import read_run
 from hersd.runstore import config_hash
 from hersd.schedules import schedule_from_record
-from hersd.tasks import CUSTOM, TASKS
+from hersd.envs.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
 

@@ -11,9 +11,9 @@ import pytest
 
 from hersd.compose import compose_train
 from hersd.config import ConfigError
-from hersd.envs import env_spec, make_env
-from hersd.goal_envs import vectorised_reward
-from hersd.replay import sample_transitions
+from hersd.envs.make import env_spec, make_env
+from hersd.envs.goal_envs import vectorised_reward
+from hersd.replay.buffer import sample_transitions
 from hersd.run_state import RunState
 from hersd.runlog import read_run
 from hersd.train import EpochStats, collect, evaluate, train

@@ -103,7 +103,7 @@ def test_the_core_imports_neither_optuna_nor_sqlalchemy():
 
 def test_light_modules_import_without_torch_or_mujoco():
     light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.study",
-             "hersd.config", "hersd.schedules", "hersd.tasks", "hersd.resources", "sweeps.launch"]
+             "hersd.config", "hersd.schedules", "hersd.envs.tasks", "hersd.resources", "sweeps.launch"]
     code = (f"import sys; import {', '.join(light)}; "
             "heavy = [m for m in ('torch', 'mujoco', 'gymnasium_robotics') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

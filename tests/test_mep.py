@@ -10,9 +10,9 @@ import hersd.run_state as run_state_module
 import hersd.train as train_module
 from hersd.compose import compose_train as compose
 from hersd.config import MEPConfig
-from hersd.goal_envs import goal_reward
-from hersd.mep import EpisodePrioritizer, entropy, rank_priorities
-from hersd.replay import Episodes, sample_transitions
+from hersd.envs.goal_envs import goal_reward
+from hersd.replay.mep import EpisodePrioritizer, entropy, rank_priorities
+from hersd.replay.buffer import Episodes, sample_transitions
 from helpers import TIMING
 from hersd.runlog import read_run
 from hersd.train import train

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hersd.goal_envs import goal_reward
-from hersd.replay import EpisodeBuffer, Episodes, sample_transitions
+from hersd.envs.goal_envs import goal_reward
+from hersd.replay.buffer import EpisodeBuffer, Episodes, sample_transitions
 
 T, N_EPISODES = 50, 40
 

@@ -9,11 +9,11 @@ the goal stays put when reached, and the loop records each step's desired goal a
 
 What hersd reads from an env (:func:`env_spec`): the observation, goal and action sizes from
 its spaces, T from its registration, the action bound, the success radius and the reward's
-range (:mod:`hersd.goal_envs`, by family), and each step's success from its info
+range (:mod:`hersd.envs.goal_envs`, by family), and each step's success from its info
 (``is_success``, or ``success`` for the mazes: :func:`step_success`; an env that reports
 neither is refused before the run starts, :func:`check_success_reported`). Rewards of
 relabelled transitions are recomputed in one call by the family's rule
-(:func:`hersd.goal_envs.vectorised_reward`).
+(:func:`hersd.envs.goal_envs.vectorised_reward`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from hersd.config import ConfigError, TaskConfig
-from hersd.goal_envs import GOAL_KEYS, is_goal_env, reward_family, reward_range, success_radius
+from hersd.envs.goal_envs import GOAL_KEYS, is_goal_env, reward_family, reward_range, success_radius
 
 # gymnasium-robotics prints a notice about the Adroit envs' rewards at import; it does not
 # concern the Fetch tasks and would otherwise open every run's output.

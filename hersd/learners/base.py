@@ -32,10 +32,10 @@ import torch
 from torch import nn
 
 from hersd.config import DDPGConfig, TrainConfig
-from hersd.replay import TransitionBatch
+from hersd.replay.buffer import TransitionBatch
 
 if TYPE_CHECKING:
-    from hersd.envs import EnvSpec
+    from hersd.envs.make import EnvSpec
 
 LEARNERS: dict[str, type["GoalConditionedLearner"]] = {}  # learner= name -> class, filled as classes are defined
 TWIN_CRITICS = ("critic", "critic2")  # TD3's and SAC's critics: the target takes their minimum

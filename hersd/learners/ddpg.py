@@ -26,10 +26,10 @@ import torch
 
 from hersd.config import DDPGConfig, TrainConfig
 from hersd.learners.base import GoalConditionedLearner, UpdateStats, frozen_q
-from hersd.replay import TransitionBatch
+from hersd.replay.buffer import TransitionBatch
 
 if TYPE_CHECKING:
-    from hersd.envs import EnvSpec
+    from hersd.envs.make import EnvSpec
 
 
 def noisy_action(action: np.ndarray, cfg: DDPGConfig, max_action: float, rng: np.random.Generator) -> np.ndarray:

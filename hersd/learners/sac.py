@@ -27,10 +27,10 @@ import torch
 
 from hersd.config import DDPGConfig, SACConfig, TrainConfig
 from hersd.learners.base import TWIN_CRITICS, GoalConditionedLearner, UpdateStats, frozen_q
-from hersd.replay import TransitionBatch
+from hersd.replay.buffer import TransitionBatch
 
 if TYPE_CHECKING:
-    from hersd.envs import EnvSpec
+    from hersd.envs.make import EnvSpec
 
 LOG_STD_RANGE = (-20.0, 2.0)
 

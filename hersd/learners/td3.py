@@ -25,7 +25,7 @@ from hersd.learners.base import TWIN_CRITICS
 from hersd.learners.ddpg import DDPG
 
 if TYPE_CHECKING:
-    from hersd.envs import EnvSpec
+    from hersd.envs.make import EnvSpec
 
 
 class TD3(DDPG):
