@@ -35,6 +35,7 @@ from hersd.envs.make import env_spec, make_env, step_success
 from hersd.run_state import discounting, load_checkpoint, make_agent
 from hersd.runlog import LOG_NAME, RunLogError, read_run
 from hersd.runstore import CHECKPOINT_NAME, RunFolder
+from hersd.schedules import schedule_from_record
 
 DEFAULT_EPISODES = 2
 WIDTH, HEIGHT = 240, 180  # pixels of a frame
@@ -212,10 +213,15 @@ def render_policy(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int, p
 
 # --------------------------------------------------------------------------- hersd-render
 def config_from_log(config: dict[str, Any]) -> TrainConfig:
-    """The TrainConfig of a log's ``/run/meta`` config dict (fields it lacks take their defaults)."""
+    """The TrainConfig of a log's ``/run/meta`` config dict (fields it lacks take their defaults; of its schedule
+    record only the settings its kind has: the paper's kinds log the flat schema's other fields too)."""
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
+    if config.get("schedule"):
+        schedule = schedule_from_record(config["schedule"])
+        config = {**config, "schedule": {"kind": config["schedule"]["kind"],
+                                         **{item.name: getattr(schedule, item.name) for item in schedule.params()}}}
     try:
         return to_train_config(OmegaConf.merge(OmegaConf.structured(TrainConfig), config))
     except OmegaConfBaseException as err:

@@ -137,3 +137,19 @@ def test_a_render_env_collected_late_leaves_later_renders_alone():
         close_render_env(env)
         closed.append(env)
         del env
+
+
+def test_every_committed_log_gives_back_the_config_of_its_folder():
+    """hersd-render reads a run's config from its log: for every committed log (the paper's kinds log the flat
+    schema's fields besides their own) that config maps to the log's own folder."""
+    from hersd.render import config_from_log
+    from hersd.runlog import read_run
+    from hersd.runstore import run_dir
+
+    results = Path(__file__).resolve().parent.parent / "results"
+    logs = sorted(results.rglob("run.mcap"))
+    assert logs
+    for log in logs:
+        cfg = config_from_log(read_run(log).meta["config"])
+        cfg.results_dir = str(results)
+        assert run_dir(cfg) == log.parent, log
