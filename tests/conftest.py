@@ -9,8 +9,6 @@ from pathlib import Path
 import pytest
 
 from helpers import TINY
-# Until every test file imports them from helpers: `from conftest import TINY, metrics` (test_schedules.py).
-from helpers import ACTION, BATCH, GOAL, OBS, TIMING, batch, metrics, run_command, tiny_learner, tiny_spec  # noqa: F401
 
 
 @pytest.fixture

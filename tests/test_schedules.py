@@ -62,7 +62,7 @@ def test_success_schedule_by_hand():
 
 
 def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exactly(tmp_path):
-    from conftest import TINY, metrics
+    from helpers import TINY, metrics
 
     from hersd.compose import compose_train
     from hersd.runlog import read_run
