@@ -9,7 +9,9 @@ on one thread, so drift in the machine's load hits all of them:
   at the paper's settings) from a run's checkpoint (``RUN_DIR`` holds ``run.mcap`` and
   ``checkpoint.pt``: a run in progress, or one made with ``keep_checkpoint=true``), reloaded before
   each timing; with ``--fresh``, from a fresh run of the same config instead (two cycles collected).
-  Prints the share of denormals in the optimiser's state.
+  Prints the share of denormals in the optimiser's state. A run that flushed holds none in its
+  checkpoints: ``--unflushed-epochs N`` first trains N epochs without flushing, as a run at the
+  former default would have.
 - ``epochs RUN_DIR --epochs 20``: whole epochs (rollouts, updates, test episodes), two copies of the
   run continued from its checkpoint, one per setting, taking turns epoch by epoch (k+1 off, k+1 on,
   k+2 off, ...): the seconds per epoch a run at each default spends over those epochs.
@@ -21,7 +23,7 @@ on one thread, so drift in the machine's load hits all of them:
   Needs ``pip install "hersd[bench]"``.
 
 Usage: python benchmarks/bench_denormal.py {cycles,epochs,sb3} RUN_DIR [--fresh] [--cycles 5]
-       [--repeats 3] [--epochs 20]
+       [--repeats 3] [--epochs 20] [--unflushed-epochs N]
 """
 
 from __future__ import annotations
@@ -57,15 +59,20 @@ def denormal_share(optimizer_state: dict) -> float:
     return denormal / max(total, 1)
 
 
-def state_at(run_dir: Path, flush: bool, fresh: bool) -> RunState:
-    """The run's state at its checkpoint (or fresh, two cycles collected) with ``flush_denormal=flush``."""
+def state_at(run_dir: Path, flush: bool, fresh: bool, unflushed_epochs: int = 0) -> RunState:
+    """The run's state at its checkpoint (or fresh, two cycles collected) with ``flush_denormal=flush``, after
+    ``unflushed_epochs`` epochs trained from there without flushing: a checkpoint of a run that flushed holds no
+    denormals, and a few thousand unflushed updates give it those an unflushed run carries."""
     cfg, checkpoint = load_run(run_dir, None)
-    state = RunState(replace(cfg, flush_denormal=flush))
+    state = RunState(replace(cfg, flush_denormal=False))
     if fresh:
         for _ in range(2):
             collect(state, 0.8, EpochStats(1, 0.8))
     else:
         state.load_state_dict(checkpoint)
+    for _ in range(unflushed_epochs):
+        run_epoch(state, state.epochs_done + 1)
+    state.cfg = replace(cfg, flush_denormal=flush)
     return state
 
 
@@ -82,7 +89,8 @@ def seconds_per_cycle(state: RunState, flush: bool, cycles: int) -> float:
 def bench_cycles(args: argparse.Namespace) -> None:
     cfg, checkpoint = load_run(args.run_dir, None)
     where = "fresh networks" if args.fresh else f"checkpoint at epoch {checkpoint['epoch']}"
-    state = state_at(args.run_dir, False, args.fresh)
+    state = state_at(args.run_dir, False, args.fresh, args.unflushed_epochs)
+    where += f" + {args.unflushed_epochs} unflushed epochs" if args.unflushed_epochs else ""
     print(f"{args.run_dir}: {where}, denormals in Adam's state: "
           f"{denormal_share(state.agent.state_dict()['optimizer']):.1%}")
     snapshot = copy.deepcopy(state.state_dict())
@@ -97,7 +105,7 @@ def bench_cycles(args: argparse.Namespace) -> None:
 
 
 def bench_epochs(args: argparse.Namespace) -> None:
-    states = {flush: state_at(args.run_dir, flush, fresh=False) for flush in SETTINGS}
+    states = {flush: state_at(args.run_dir, flush, fresh=False) for flush in SETTINGS}  # the same start: no denormals
     first = states[False].epochs_done + 1
     seconds: dict[bool, list[float]] = {flush: [] for flush in SETTINGS}
     for epoch in range(first, first + args.epochs):
@@ -165,7 +173,7 @@ def hersd_seconds_per_cycle(state: RunState, flush: bool, cycles: int) -> float:
 
 def bench_sb3(args: argparse.Namespace) -> None:
     for fresh in (True, False):
-        state = state_at(args.run_dir, True, fresh)
+        state = state_at(args.run_dir, True, fresh, 0 if fresh else args.unflushed_epochs)
         fill = state.buffer.size * HORIZON
         model = sb3_model(0 if fresh else fill - 2 * STEPS_PER_CYCLE)
         label = "fresh" if fresh else f"trained, epoch {state.epochs_done}"
@@ -196,6 +204,9 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=5)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--epochs", type=int, default=20)
+    parser.add_argument("--unflushed-epochs", type=int, default=0,
+                        help="cycles, sb3: train this many epochs without flushing first (a flushing run's "
+                             "checkpoint holds no denormals)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     set_intra_op_threads(False)
