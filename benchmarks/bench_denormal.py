@@ -76,12 +76,15 @@ def state_at(run_dir: Path, flush: bool, fresh: bool, unflushed_epochs: int = 0)
     return state
 
 
-def seconds_per_cycle(state: RunState, flush: bool, cycles: int) -> float:
-    """Mean seconds of ``cycles`` update cycles of ``state`` at ``flush_denormal=flush``."""
+def seconds_per_cycle(state: RunState, flush: bool, cycles: int, rollouts: bool = False) -> float:
+    """Mean seconds of ``cycles`` update cycles of ``state`` at ``flush_denormal=flush`` (with ``rollouts``,
+    whole cycles: collect + update)."""
     state.cfg = replace(state.cfg, flush_denormal=flush)
     stats = EpochStats(state.epochs_done + 1, 0.8)
     start = time.perf_counter()
     for _ in range(cycles):
+        if rollouts:
+            collect(state, 0.8, stats)
         update(state, 0.8, stats)
     return (time.perf_counter() - start) / cycles
 
@@ -160,17 +163,6 @@ def sb3_seconds_per_cycle(model, flush: bool, cycles: int) -> float:
         torch.set_flush_denormal(False)
 
 
-def hersd_seconds_per_cycle(state: RunState, flush: bool, cycles: int) -> float:
-    """Mean seconds of ``cycles`` whole cycles (collect + update) at ``flush_denormal=flush``."""
-    state.cfg = replace(state.cfg, flush_denormal=flush)
-    stats = EpochStats(state.epochs_done + 1, 0.8)
-    start = time.perf_counter()
-    for _ in range(cycles):
-        collect(state, 0.8, stats)
-        update(state, 0.8, stats)
-    return (time.perf_counter() - start) / cycles
-
-
 def bench_sb3(args: argparse.Namespace) -> None:
     for fresh in (True, False):
         state = state_at(args.run_dir, True, fresh, 0 if fresh else args.unflushed_epochs)
@@ -178,8 +170,8 @@ def bench_sb3(args: argparse.Namespace) -> None:
         model = sb3_model(0 if fresh else fill - 2 * STEPS_PER_CYCLE)
         label = "fresh" if fresh else f"trained, epoch {state.epochs_done}"
         print(f"-- {label}: hersd holds {fill} transitions, SB3 {model.replay_buffer.size() * ENVS}", flush=True)
-        variants = {"hersd flush_denormal=false (default before)": lambda: hersd_seconds_per_cycle(state, False, args.cycles),
-                    "hersd flush_denormal=true (default now)": lambda: hersd_seconds_per_cycle(state, True, args.cycles),
+        variants = {"hersd flush_denormal=false (default before)": lambda: seconds_per_cycle(state, False, args.cycles, rollouts=True),
+                    "hersd flush_denormal=true (default now)": lambda: seconds_per_cycle(state, True, args.cycles, rollouts=True),
                     "SB3 2.9.2 at its defaults": lambda: sb3_seconds_per_cycle(model, False, args.cycles),
                     "SB3 2.9.2 + torch.set_flush_denormal(True)": lambda: sb3_seconds_per_cycle(model, True, args.cycles)}
         times: dict[str, list[float]] = {name: [] for name in variants}
