@@ -170,10 +170,11 @@ def bench_sb3(args: argparse.Namespace) -> None:
         model = sb3_model(0 if fresh else fill - 2 * STEPS_PER_CYCLE)
         label = "fresh" if fresh else f"trained, epoch {state.epochs_done}"
         print(f"-- {label}: hersd holds {fill} transitions, SB3 {model.replay_buffer.size() * ENVS}", flush=True)
-        variants = {"hersd flush_denormal=false (default before)": lambda: seconds_per_cycle(state, False, args.cycles, rollouts=True),
-                    "hersd flush_denormal=true (default now)": lambda: seconds_per_cycle(state, True, args.cycles, rollouts=True),
-                    "SB3 2.9.2 at its defaults": lambda: sb3_seconds_per_cycle(model, False, args.cycles),
-                    "SB3 2.9.2 + torch.set_flush_denormal(True)": lambda: sb3_seconds_per_cycle(model, True, args.cycles)}
+        variants = {
+            "hersd flush_denormal=false (default before)": lambda: seconds_per_cycle(state, False, args.cycles, True),
+            "hersd flush_denormal=true (default now)": lambda: seconds_per_cycle(state, True, args.cycles, True),
+            "SB3 2.9.2 at its defaults": lambda: sb3_seconds_per_cycle(model, False, args.cycles),
+            "SB3 2.9.2 + torch.set_flush_denormal(True)": lambda: sb3_seconds_per_cycle(model, True, args.cycles)}
         times: dict[str, list[float]] = {name: [] for name in variants}
         for _ in range(args.repeats):
             for name, measure in variants.items():
