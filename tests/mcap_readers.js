@@ -1,4 +1,4 @@
-// Read MCAP files with the official TypeScript library, @mcap/core (tests/test_mcap_readers.py):
+// Read MCAP files with the official TypeScript library, @mcap/core (tests/test_runlog.py):
 // its indexed reader (McapIndexedReader, summary and chunk index) and its streaming reader
 // (McapStreamReader, record by record). Prints one JSON object: path -> {indexed, stream}, each
 // {topics: {topic: messages}, epochs: [epoch field of each /epoch message]} or {error: "..."}.

@@ -1,4 +1,4 @@
-"""Run logs written by hand for the run log's tests (tests/test_mcap_readers.py, tests/test_land.py): the
+"""Run logs written by hand for the run log's tests (tests/test_runlog.py, tests/test_land.py): the
 metadata and an epoch record with every field, and a log in the earlier format."""
 
 from __future__ import annotations

@@ -300,3 +300,41 @@ def test_a_run_stopped_under_the_earlier_format_resumes_into_the_current_one(tmp
     with open(path, "rb") as stream:
         reader = make_reader(stream)
         assert reader.get_header().library == LIBRARY and reader.get_summary().statistics.message_count == 6
+
+
+def test_truncated_log_reads_back_its_complete_epochs(tmp_path, tiny):
+    import pandas as pd
+
+    from hersd.compose import compose_train
+    from hersd.train import train
+
+    log_path = train(compose_train([*tiny, "threads=1", "epochs=3"]))
+    data = log_path.read_bytes()
+    full = read_run(log_path)
+    # cut inside the last epoch's record: the status message and footer follow it
+    cut = log_path.with_name("cut.mcap")
+    last_epoch_at = data.rfind(b'{"epoch": 3')
+    cut.write_bytes(data[:last_epoch_at + 20])
+    damaged = read_run(cut)
+    assert damaged.damaged and not damaged.complete
+    pd.testing.assert_frame_equal(damaged.epochs, full.epochs.iloc[:2])
+
+
+def test_log_is_standard_mcap_whose_messages_follow_their_json_schemas(tmp_path, tiny):
+    """Generic MCAP readers (summary-based, not hersd's) read the log; every message validates."""
+    import jsonschema
+
+    from hersd.compose import compose_train
+    from hersd.train import train
+
+    log_path = train(compose_train([*tiny, "threads=1", "epochs=2"]))
+    with open(log_path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count == 4  # meta, 2 epochs, status
+        topics = []
+        for schema, channel, message in reader.iter_messages():
+            assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            jsonschema.validate(json.loads(message.data), json.loads(schema.data))
+            topics.append(channel.topic)
+    assert topics == ["/run/meta", "/epoch", "/epoch", "/run/status"]
