@@ -1,4 +1,4 @@
-"""Hydra composition for the commands that compose configs (hersd-train, -sweep, -search, -campaign).
+"""Hydra composition for the commands that compose configs (hersd-train, -sweep, -search).
 
 The YAML configs ship inside the package as ``hersd.conf`` (the repository's top-level
 ``conf/``, mapped into the wheel by pyproject.toml), so every command finds them through the
