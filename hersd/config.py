@@ -11,7 +11,9 @@ Every default is the seed paper's appendix setting (which follows the reference 
 
 from __future__ import annotations
 
+import importlib.util
 import math
+import pkgutil
 from dataclasses import asdict, dataclass, field
 from typing import Any, List, Optional
 
@@ -23,7 +25,14 @@ from hersd.envs.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
-LEARNERS = ("ddpg", "td3", "sac")  # learner= values; each is a class in hersd/learners/ (docs/LEARNERS.md)
+
+
+def learner_names() -> list[str]:
+    """The learner= values: the modules of hersd/learners/ but its base, each holding the learner class of
+    that NAME (docs/LEARNERS.md), found without importing them (and torch)."""
+    package = importlib.util.find_spec("hersd.learners")
+    return sorted(module.name for module in pkgutil.iter_modules(package.submodule_search_locations)
+                  if module.name != "base")
 
 # Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
 # The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
@@ -214,7 +223,8 @@ class LearnerConfig:
     sac: SACConfig = field(default_factory=SACConfig)
 
     def __post_init__(self) -> None:
-        _check(self.name in LEARNERS, f"learner={self.name!r} is unknown; choose one of: {', '.join(LEARNERS)}")
+        names = learner_names()
+        _check(self.name in names, f"learner={self.name!r} is unknown; choose one of: {', '.join(names)}")
 
 
 @dataclass

@@ -12,7 +12,7 @@ import torch
 from helpers import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
 from hersd.compose import compose_train
-from hersd.config import LEARNERS as CONFIG_LEARNERS
+from hersd.config import learner_names
 from hersd.learners import LEARNERS
 from hersd.runlog import read_run
 from hersd.train import train
@@ -33,8 +33,9 @@ CHECKPOINT_LAYOUT = {
 }
 
 
-def test_every_configurable_learner_is_a_registered_class_that_builds_itself():
-    assert set(LEARNERS) == set(CONFIG_LEARNERS)
+def test_every_learner_module_registers_the_class_of_its_name_that_builds_itself():
+    assert learner_names() == ["ddpg", "sac", "td3"]
+    assert set(LEARNERS) == set(learner_names())
     for name, cls in LEARNERS.items():
         agent = tiny_learner(name)
         assert type(agent) is cls and cls.NAME == name and cls.LOSS_SETTINGS
