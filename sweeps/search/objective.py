@@ -20,8 +20,8 @@ import numpy as np
 import optuna
 
 from hersd.config import ConfigError, TrainConfig
-from hersd.runlog import LOG_NAME, read_records
-from hersd.runstore import run_dir
+from hersd.runlog import read_records
+from hersd.runstore import RunFolder, run_dir
 from hersd.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, mean_rates, param_overrides, trial_config
 from sweeps.search.config import SpaceConfig, space_bounds
 from sweeps.search.plan import SearchPlan
@@ -114,7 +114,7 @@ def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, p
     from hersd.train import train  # torch and MuJoCo: only in the processes that train
 
     metric, epochs = plan.search.metric, plan.epochs
-    log_path = run_dir(cfg) / LOG_NAME
+    log_path = RunFolder(run_dir(cfg)).log
 
     def on_epoch(record: dict) -> None:
         """After each logged epoch: heartbeat, report the steps so far, maybe prune."""
