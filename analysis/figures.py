@@ -264,7 +264,8 @@ def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
     if curves.empty:
         return []
     caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, per epoch, "
-               "for each schedule of the loaded runs (eq. 9; several configurations may share a schedule). "
+               "for each schedule of the loaded runs (each kind's own formula: eq. 9 for the paper's decays; several "
+               "configurations may share a schedule). "
                f"Constant schedules (HER and ARCHER use ε = {HER_EPS:g}) are dashed and drawn in every panel.")
     return [ReportFigure("schedules", "Relabel-rate schedules (Fig. 1)", caption, partial(_draw_schedules, curves))]
 
@@ -273,7 +274,7 @@ def _draw_schedules(curves: pd.DataFrame) -> Figure:
     colours = schedule_colours(curves.rename(columns={"eps": "eps_k", "eps_setting": "eps"}))
     kinds = decay_kinds(curves) or list(dict.fromkeys(curves["schedule"]))
     several_k = curves["total_epochs"].nunique() > 1
-    figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k) = 1 − β1·(k/K)^exp(β2)")
+    figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k)")
     for axis, kind in zip(axes, kinds):
         shown = curves[curves["constant_rate"].astype(bool) | (curves["schedule"] == kind)]
         for (label, total_epochs), curve in shown.groupby(["label", "total_epochs"], sort=False):
