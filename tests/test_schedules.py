@@ -152,7 +152,7 @@ def test_kind_names_are_literals_only_in_their_own_schedule_file():
 
     root = Path(__file__).resolve().parent.parent
     found = []
-    for package in ("hersd", "sweeps", "analysis"):
+    for package in ("hersd", "sweeps", "analysis", "scripts"):
         for path in sorted((root / package).rglob("*.py")):
             name = path.relative_to(root).as_posix()
             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):

@@ -1,5 +1,5 @@
 """hersd/study.py, the study's contract: storage specs and their names, the trial parameters'
-encoding, the report command. (Opening storages: tests/test_search.py for writing,
+encoding, the report command. (Opening storages: tests/test_search_storage.py for writing,
 tests/test_studies.py read-only.)"""
 
 from __future__ import annotations

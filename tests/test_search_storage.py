@@ -1,0 +1,56 @@
+"""sweeps/search/storage.py: opening a study storage for writing."""
+
+from __future__ import annotations
+
+import importlib.util
+import multiprocessing
+import sys
+from pathlib import Path
+
+import optuna
+import pytest
+from searches import fails_with, tiny_search
+
+from sweeps.search.storage import open_storage
+
+
+@pytest.mark.skipif(importlib.util.find_spec("psycopg2") is None, reason="needs psycopg2 (hersd[cluster])")
+def test_an_unreachable_database_is_one_line(tmp_path: Path, capsys) -> None:
+    err = fails_with(["search.storage=postgresql://u:secret@127.0.0.1:1/x", *tiny_search(tmp_path)], capsys)
+    assert "search.storage: cannot reach the database at postgresql+psycopg2://u:***@127.0.0.1:1/x" in err
+    assert "secret" not in err
+
+
+def test_a_missing_database_driver_is_one_line(tmp_path: Path, capsys, monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "psycopg2", None)  # import psycopg2 now fails as if not installed
+    err = fails_with(["search.storage=postgresql+psycopg2://u@127.0.0.1:1/x", *tiny_search(tmp_path)], capsys)
+    assert 'the database driver psycopg2 is not installed; pip install "hersd[cluster]"' in err
+
+
+def _claim_enqueued(db: str, calls: str) -> None:
+    study = optuna.load_study(study_name="queue", storage=open_storage(db))
+
+    def record(trial: optuna.Trial) -> float:
+        with open(calls, "a") as out:
+            out.write(f"{trial.number}\n")
+        return trial.suggest_float("x", 0.0, 1.0)
+
+    study.optimize(record, n_trials=20)
+
+
+def test_sqlite_workers_never_claim_one_enqueued_trial_twice(tmp_path: Path) -> None:
+    """Plain SQLite lets two workers popping the queue at once both take a trial (seen here
+    as duplicated numbers and 'Cannot tell a COMPLETE trial' crashes); the claim lock stops it."""
+    db, calls = str(tmp_path / "queue.db"), str(tmp_path / "calls.txt")
+    study = optuna.create_study(study_name="queue", storage=open_storage(db))
+    for i in range(40):
+        study.enqueue_trial({"x": i / 40})
+    context = multiprocessing.get_context("fork")  # quick to start; the children open their own storage
+    processes = [context.Process(target=_claim_enqueued, args=(db, calls)) for _ in range(2)]
+    for process in processes:
+        process.start()
+    for process in processes:
+        process.join(timeout=120)
+    numbers = Path(calls).read_text().split()
+    assert [process.exitcode for process in processes] == [0, 0]
+    assert len(numbers) == len(set(numbers)) == 40

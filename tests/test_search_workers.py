@@ -1,0 +1,81 @@
+"""sweeps/search/workers.py: the local and SLURM workers."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+from optuna.trial import TrialState
+from searches import _count_finished, fails_with, load, only_db, run_meta, tiny_search
+
+import hersd.train
+from hersd.resources import available_cores
+from sweeps.search import cli, plan as search_plan, workers
+from sweeps.search.config import SlurmConfig
+
+
+def test_slurm_settings_come_from_the_packaged_preset_and_search_slurm() -> None:
+    assert workers.slurm_settings(SlurmConfig()) == {"partition": None, "timeout_min": 240, "cpus_per_task": 1,
+                                                     "mem_gb": 8}
+    settings = workers.slurm_settings(SlurmConfig(partition="cpu", mem_gb=2))
+    assert (settings["partition"], settings["mem_gb"], settings["timeout_min"]) == ("cpu", 2, 240)
+
+
+@pytest.mark.parametrize("sinfo, override, message", [
+    ("echo 'sinfo: fatal: no controller' >&2; exit 1", "", "SLURM does not answer here (sinfo: fatal: no controller)"),
+    ("printf 'debug*\\ncpu\\n'", "search.slurm.partition=gpu", "search.slurm.partition=gpu: no partition gpu here; "
+                                                               "choose among: debug, cpu"),
+])
+def test_slurm_problems_stop_the_search_at_start(sinfo: str, override: str, message: str, tmp_path: Path,
+                                                 capsys, monkeypatch) -> None:
+    (tmp_path / "bin").mkdir()
+    (tmp_path / "bin" / "sinfo").write_text(f"#!/bin/sh\n{sinfo}\n")
+    (tmp_path / "bin" / "sinfo").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}:{os.environ['PATH']}")
+    err = fails_with(["search.launcher=slurm", *([override] if override else []), *tiny_search(tmp_path)], capsys)
+    assert message in err
+    assert not (tmp_path / "search").exists()
+
+
+def test_crashed_run_fails_its_trial_and_the_study_goes_on(tmp_path: Path, monkeypatch) -> None:
+    real_train, real_compose = hersd.train.train, search_plan.compose_train
+    calls, composed = [], []
+
+    def crash_first(cfg, command="", on_epoch=None):
+        calls.append(cfg)
+        if len(calls) == 1:
+            raise RuntimeError("simulated crash")
+        return real_train(cfg, command=command, on_epoch=on_epoch)
+
+    monkeypatch.setattr(hersd.train, "train", crash_first)
+    monkeypatch.setattr(search_plan, "compose_train", lambda overrides: composed.append(1) or real_compose(overrides))
+    cli.main(["search.n_trials=2", "search.pruner.kind=none", "threads=1", *tiny_search(tmp_path, epochs=2)])
+    study = load(only_db(tmp_path))
+    assert [t.state for t in study.trials] == [TrialState.FAIL, TrialState.COMPLETE]
+    assert len(composed) == 1  # the training config is composed once; trials replace fields of it
+    meta = run_meta(study.trials[1].user_attrs["run_dirs"][0])
+    assert meta["threads"] == 1 and meta["config"]["threads"] == "1"  # threads=N given: kept
+
+
+def test_slurm_workers_run_as_submitit_jobs_each_on_its_whole_allocation(tmp_path: Path, capsys,
+                                                                          monkeypatch) -> None:
+    """search.launcher=slurm through submitit's local executor (no SLURM here): the jobs run the
+    workers; each job's runs take every core it has (concurrent_runs=1), not a share."""
+    import submitit
+
+    real_executor = submitit.AutoExecutor
+    monkeypatch.setattr(submitit, "AutoExecutor", lambda folder, cluster: real_executor(folder, cluster="local"))
+    monkeypatch.setattr(cli, "check_slurm", lambda slurm: None)
+    cli.main(["search.launcher=slurm", "search.n_jobs=2", "search.n_trials=2", "search.pruner.kind=none",
+              *tiny_search(tmp_path, epochs=2)])
+    assert "submitted SLURM jobs" in capsys.readouterr().out
+    db = only_db(tmp_path)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and _count_finished(Path(db)) < 2:
+        time.sleep(1.0)
+    study = load(db)
+    assert [t.state for t in study.trials] == [TrialState.COMPLETE] * 2, list((tmp_path / "search").rglob("*.err"))
+    for trial in study.trials:
+        assert 1 <= run_meta(trial.user_attrs["run_dirs"][0])["threads"] <= available_cores()
