@@ -156,23 +156,102 @@ def test_a_custom_task_is_named_by_its_env_id():
     assert config_hash(cfg) == config_hash(compose_train(["task=custom", "task.env_id=HandManipulateEgg-v1"]))
 
 
-def _leaves(node, path: tuple = ()) -> dict[tuple, object]:
-    """A YAML mapping's values by their key path (lists are values)."""
-    if isinstance(node, dict):
-        return {leaf: value for key, child in node.items() for leaf, value in _leaves(child, (*path, key)).items()}
-    return {path: node}
+CONF = Path(__file__).resolve().parent.parent / "conf"
+RESTATED = "# restated:"  # a line that sets a schema default carries this marker and the reason after it
 
 
-@pytest.mark.parametrize("name", sorted(path.stem for path in (Path(__file__).resolve().parent.parent
-                                                                 / "conf" / "search").glob("*.yaml")))
-def test_search_files_state_only_what_differs_from_the_schema(name):
-    import yaml
+def conf_files() -> list[str]:
+    """Every YAML file under conf/ but Hydra's own launcher configs (conf/hydra/, whose schema is Hydra's)."""
+    names = sorted(path.relative_to(CONF).as_posix() for path in CONF.rglob("*.yaml"))
+    return [name for name in names if not name.startswith("hydra/")]
 
+
+def file_schema(name: str) -> tuple[dict, tuple[str, ...]]:
+    """The defaults of the schema a conf/ file is merged onto, and the key path the file's keys start at."""
+    from sweeps.plan import SweepConfig
     from sweeps.search.config import SearchConfig
 
-    root = Path(__file__).resolve().parent.parent
-    stated = yaml.safe_load((root / "conf" / "search" / f"{name}.yaml").read_text(encoding="utf-8"))
-    stated.pop("defaults")
-    schema = _leaves(asdict(SearchConfig()))
-    restated = [".".join(key) for key, value in _leaves(stated).items() if key in schema and schema[key] == value]
-    assert not restated, f"conf/search/{name}.yaml restates the schema's defaults: {restated}"
+    group = name.split("/")[0] if "/" in name else name.removesuffix(".yaml")
+    schemas = {"train": (TrainConfig, ()), "sweep": (SweepConfig, ()), "grid": (SweepConfig, ()),  # grids: _global_
+               "search": (SearchConfig, ()),
+               **{group: (TrainConfig, (group,)) for group in ("task", "algo", "learner", "schedule")}}
+    assert group in schemas, f"conf/{name}: which schema is it merged onto? add its group to file_schema"
+    schema, at = schemas[group]
+    return asdict(schema()), at
+
+
+def schedule_defaults(stated: dict, name: str) -> dict:
+    """The schedule node's defaults: the default kind, and the parameters' defaults of the kind the node selects
+    (its own ``kind``, else that of the preset its defaults list builds on, else the default kind's)."""
+    import yaml
+
+    from hersd.schedules import DEFAULT, schedule_class
+
+    kind, parents = stated.get("kind"), (stated.get("defaults", []) if name.startswith("schedule/") else [])
+    while kind is None and parents:
+        parent = yaml.safe_load((CONF / "schedule" / f"{parents[0]}.yaml").read_text(encoding="utf-8")) or {}
+        kind, parents = parent.get("kind"), parent.get("defaults", [])
+    cls = schedule_class(kind) if kind else DEFAULT
+    return {"kind": DEFAULT.kind, **{item.name: item.default for item in cls.params()}}
+
+
+def restated_keys(stated: dict, schema: dict, path: tuple = ()) -> list[tuple]:
+    """Key paths whose stated value is the schema's default there (mappings compared key by key)."""
+    found = []
+    for key, value in stated.items():
+        default = schema.get(key, KeyError) if isinstance(schema, dict) else KeyError
+        if isinstance(value, dict) and isinstance(default, dict):
+            found += restated_keys(value, default, (*path, key))
+        elif default is not KeyError and value == default:
+            found.append((*path, key))
+    return found
+
+
+def key_lines(text: str) -> dict[tuple, str]:
+    """Each key path of a YAML document -> the line its key is on."""
+    import yaml
+
+    source = text.splitlines()
+
+    def walk(node, path: tuple) -> dict[tuple, str]:
+        if not isinstance(node, yaml.MappingNode):
+            return {}
+        return {found: line for key, value in node.value
+                for found, line in {(*path, key.value): source[key.start_mark.line],
+                                    **walk(value, (*path, key.value))}.items()}
+
+    return walk(yaml.compose(text, Loader=yaml.SafeLoader), ())
+
+
+@pytest.mark.parametrize("name", conf_files())
+def test_config_files_state_only_what_differs_from_the_schema(name):
+    """Each key a conf/ file sets differs from its schema's default there (or its line says why it restates it,
+    after ``# restated:``): a file reads as what its option changes. Hydra's own ``hydra`` and ``defaults`` nodes
+    are not the schema's."""
+    import yaml
+
+    text = (CONF / name).read_text(encoding="utf-8")
+    stated = yaml.safe_load(text) or {}
+    schema, at = file_schema(name)
+    for key in at:
+        schema = schema[key]
+    if at == ("schedule",):
+        schema = schedule_defaults(stated, name)
+    elif isinstance(stated.get("schedule"), dict):  # a grid's schedule node, on the sweep's default schedule
+        schema = {**schema, "schedule": schedule_defaults(stated["schedule"], name)}
+    own = {key: value for key, value in stated.items() if key not in ("defaults", "hydra")}
+    lines = key_lines(text)
+    unexplained = [".".join(key) for key in restated_keys(own, schema)
+                   if not lines[key].partition(RESTATED)[2].strip()]
+    assert not unexplained, (f"conf/{name} restates the schema's defaults: {unexplained}; leave them out (a comment "
+                             f"may say so), or give the reason on the line after '{RESTATED}'")
+
+
+def test_the_restatement_check_finds_defaults_at_any_depth_and_kind():
+    stated = {"seed": 0, "epochs": 50, "ddpg": {"polyak": 0.95, "gamma": 0.9}}
+    assert restated_keys(stated, asdict(TrainConfig())) == [("seed",), ("ddpg", "polyak")]
+    for stated, restated in (({"kind": "constant", "eps": 0.9}, [("kind",)]), ({"kind": "linear", "beta1": 0.0},
+                                                                                 [("beta1",)])):
+        assert restated_keys(stated, schedule_defaults(stated, "schedule/x.yaml")) == restated
+    assert schedule_defaults({"defaults": ["exponential"]}, "schedule/x.yaml")["beta2"] == 0.0  # the parent's kind
+    assert key_lines("a:\n  b: {c: 1}  # restated: why\n")[("a", "b", "c")] == "  b: {c: 1}  # restated: why"
