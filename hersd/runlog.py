@@ -342,9 +342,10 @@ class RunLogError(ValueError):
 
 
 def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
-    """Every readable message of a run log in file order (payload nulls dropped) and whether the file was
-    damaged (no valid end: the messages before the damage are returned)."""
-    path = Path(path)
+    """Every readable message of a run log (``path``: the file, or the run's folder holding it) in file order
+    (payload nulls dropped) and whether the file was damaged (no valid end: the messages before the damage are
+    returned)."""
+    path = Path(path) / LOG_NAME if Path(path).is_dir() else Path(path)
     messages: list[LoggedMessage] = []
     damaged = False
     try:
@@ -364,7 +365,7 @@ def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
 
 def read_records(path: str | Path) -> RunRecords:
     """Read a run log's messages (any format); a damaged file yields every epoch written before the damage."""
-    path = Path(path)
+    path = Path(path) / LOG_NAME if Path(path).is_dir() else Path(path)
     messages, damaged = read_messages(path)
     sessions = [{**{name: None for name in META_NULLABLE}, **message.payload}
                 for message in messages if message.topic == "/run/meta"]
@@ -387,7 +388,7 @@ def rewritten(path: str | Path) -> bytes:
 
 
 def read_run(path: str | Path) -> RunLog:
-    """Read a run log into a DataFrame of its epochs (see :func:`read_records`)."""
+    """Read a run log (the file, or the run's folder) into a DataFrame of its epochs (see :func:`read_records`)."""
     raw = read_records(path)
     epochs = pd.DataFrame.from_records(raw.records, columns=list(EPOCH_FIELDS))
     epochs = epochs.astype({name: "float64" for name, (kind, _) in EPOCH_FIELDS.items() if kind == "number"})

@@ -30,7 +30,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from hersd.runlog import CHANNELS, LIBRARY, META_FIELDS, RunLogWriter, read_records, read_run, rewritten
+from hersd.runlog import CHANNELS, LIBRARY, META_FIELDS, RunLogError, RunLogWriter, read_records, read_run, rewritten
 from runlogs import META, epoch_record, write_old_format
 from servers import unavailable
 
@@ -208,6 +208,15 @@ def test_every_field_a_committed_log_holds_is_declared_and_none_is_null():
 def messages_as_stored(path: Path) -> list[tuple]:
     """(topic, log_time, publish_time, sequence, payload with null object keys dropped) of every message."""
     return [(m.topic, m.log_time, m.publish_time, m.sequence, m.payload) for m in read_records(path).messages]
+
+
+def test_a_run_is_read_by_its_folder_as_by_its_log(tmp_path):
+    log = COMMITTED[0]
+    by_folder, by_file = read_run(log.parent), read_run(log)
+    assert by_folder.path == by_file.path == log
+    assert by_folder.epochs.equals(by_file.epochs) and len(by_folder.epochs) > 0
+    with pytest.raises(RunLogError, match=f"^{tmp_path / 'run.mcap'}: cannot open \\(No such file or directory\\)$"):
+        read_run(tmp_path)
 
 
 def test_old_format_logs_read_resume_and_convert_with_every_record_identical(tmp_path, capsys):
