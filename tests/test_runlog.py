@@ -110,8 +110,8 @@ def test_mcap_core_reads_every_committed_log_and_a_killed_one_indexed_and_stream
     for path in [*COMMITTED, killed]:
         records = read_records(path)
         epochs = [record["epoch"] for record in records.records]
-        expected = {"/run/meta": len(records.sessions), "/epoch": len(epochs)} | (
-            {"/run/status": 1} if records.complete else {})
+        expected = {"/run/meta": len(records.sessions)} | ({"/epoch": len(epochs)} if epochs else {}) | (
+            {"/run/status": 1} if records.complete else {})  # a topic without messages is not counted
         for reader in ("indexed", "stream"):
             got = results[str(path)][reader]
             if got.get("error") or got["topics"] != expected or sorted(got["epochs"]) != epochs:
