@@ -341,11 +341,17 @@ class RunLogError(ValueError):
     """The file is not a readable hersd run log."""
 
 
+def log_path(path: str | Path) -> Path:
+    """A run's log file from the file itself or the run's folder holding it."""
+    path = Path(path)
+    return path / LOG_NAME if path.is_dir() else path
+
+
 def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
     """Every readable message of a run log (``path``: the file, or the run's folder holding it) in file order
     (payload nulls dropped) and whether the file was damaged (no valid end: the messages before the damage are
     returned)."""
-    path = Path(path) / LOG_NAME if Path(path).is_dir() else Path(path)
+    path = log_path(path)
     messages: list[LoggedMessage] = []
     damaged = False
     try:
@@ -365,7 +371,7 @@ def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
 
 def read_records(path: str | Path) -> RunRecords:
     """Read a run log's messages (any format); a damaged file yields every epoch written before the damage."""
-    path = Path(path) / LOG_NAME if Path(path).is_dir() else Path(path)
+    path = log_path(path)
     messages, damaged = read_messages(path)
     sessions = [{**{name: None for name in META_NULLABLE}, **message.payload}
                 for message in messages if message.topic == "/run/meta"]
