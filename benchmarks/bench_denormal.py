@@ -108,7 +108,7 @@ def bench_cycles(args: argparse.Namespace) -> None:
 
 
 def bench_epochs(args: argparse.Namespace) -> None:
-    states = {flush: state_at(args.run_dir, flush, fresh=False) for flush in SETTINGS}  # the same start: no denormals
+    states = {flush: state_at(args.run_dir, flush, fresh=False) for flush in SETTINGS}  # one checkpoint, two copies
     first = states[False].epochs_done + 1
     seconds: dict[bool, list[float]] = {flush: [] for flush in SETTINGS}
     for epoch in range(first, first + args.epochs):
