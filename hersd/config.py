@@ -275,8 +275,9 @@ class TrainConfig:
     # Treat denormal floats (|x| < 1.2e-38) as zero in the run's torch work (updates, acting, bias evaluation,
     # animations; every intra-op thread; the physics stays IEEE), as the reference's TensorFlow does for its
     # kernels (hersd/denormals.py). Adam's moments of units whose gradient died decay through the denormal
-    # range for thousands of steps, and x86 CPUs compute on denormals many times slower. false retraces runs
-    # made without it. Changes floating-point results as a CPU type does: logged, not part of the run's identity.
+    # range for thousands of steps, and some x86 CPUs (Intel Xeon here, not AMD EPYC) compute on them many
+    # times slower. false retraces runs made without it. Changes floating-point results as a CPU type does:
+    # logged, not part of the run's identity.
     flush_denormal: bool = True
 
     def __post_init__(self) -> None:
