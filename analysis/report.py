@@ -105,7 +105,7 @@ TABLE_NOTES = {
 PAGE_STYLE = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:1em}"
               # a cell wraps between words only: numbers never, text (labels, headers) at its spaces
               "table.data{border-collapse:collapse;font-size:0.85em;font-variant-numeric:tabular-nums}"
-              "table.data td,table.data th{padding:2px 6px;border-bottom:1px solid #ddd;text-align:right;"
+              "table.data td,table.data th{padding:2px 5px;border-bottom:1px solid #ddd;text-align:right;"
               "overflow-wrap:normal;word-break:normal}"
               "table.data td{white-space:nowrap}"
               "table.data th{vertical-align:bottom;font-weight:600;max-width:9em}"

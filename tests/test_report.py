@@ -183,7 +183,7 @@ def test_the_readme_opens_with_the_committed_reports_fetchpush_curves_and_their_
     top = (root / "README.md").read_text(encoding="utf-8").split("\nHindsight experience replay")[0]
     (image,) = re.findall(r"\]\((results/report/figures/[^)]+\.png)\)", top)
     assert (root / image).is_file()
-    summary = pd.read_csv(root / "results/report/tables/summary.csv").set_index("config").loc[
+    summary = pd.read_csv(root / "results/report/tables/summary.csv").query("task == 'push'").set_index("config").loc[
         ["HER", "HER eps=0.874375", "linear b1=0.25", "success b1=0.25"]]
     text = " ".join(top.split())
     for config, row in summary.iterrows():
@@ -193,8 +193,8 @@ def test_the_readme_opens_with_the_committed_reports_fetchpush_curves_and_their_
     seeds, in_progress = summary["seeds"], summary["in_progress"]
     if in_progress.iloc[3]:
         assert f"({seeds.iloc[3]} seeds complete, {in_progress.iloc[3]} in progress)" in text
-    else:  # every arm complete: one count for all four
-        assert seeds.nunique() == 1 and in_progress.sum() == 0 and f"({seeds.iloc[0]} seeds each)" in text
+    else:  # one count of complete seeds for all four (runs in progress stay out of every median)
+        assert seeds.nunique() == 1 and f"({seeds.iloc[0]} seeds each)" in text
 
 
 def test_the_summary_header_names_the_epoch_of_final_success_when_the_rows_share_it(tmp_path):
