@@ -197,6 +197,23 @@ def test_the_readme_opens_with_the_committed_reports_fetchpush_curves_and_their_
         assert "(" + ", ".join(f"{n}" for n in seeds.iloc[:3]) + f" and {seeds.iloc[3]} complete seeds)" in text
 
 
+def test_the_readme_opening_gives_fetchpickandplaces_numbers_as_the_committed_tables_say():
+    """README.md's FetchPickAndPlace sentence: seeds, median success at epoch 200, the gain, its
+    permutation p and the epoch of 0.5, from tables/summary.csv and tables/permutation_tests.csv."""
+    root = Path(__file__).resolve().parent.parent
+    text = " ".join((root / "README.md").read_text(encoding="utf-8").split("\nHindsight experience replay")[0].split())
+    tables = root / "results/report/tables"
+    summary = pd.read_csv(tables / "summary.csv").query("task == 'pick_and_place'").set_index("config")
+    her, linear = summary.loc["HER"], summary.loc["linear b1=0.25"]
+    test = pd.read_csv(tables / "permutation_tests.csv").query(
+        "task == 'pick_and_place' and config == 'linear b1=0.25' and versus == 'HER'").iloc[0]
+    gain = 100 * (linear["final_median"] / her["final_median"] - 1)
+    assert f"{linear['seeds']} complete seeds each" in text and her["seeds"] == linear["seeds"]
+    assert (f"at epoch 200 {linear['final_median']:.4g} with the linear decay against {her['final_median']:.4g} "
+            f"with HER ({gain:+.1f} %; one-sided permutation p = {test['p_final']:.2g})") in text
+    assert f"0.5 first reached at epoch {linear['epochs_to_0.5']:.0f} against {her['epochs_to_0.5']:.0f}" in text
+
+
 def test_the_summary_header_names_the_epoch_of_final_success_when_the_rows_share_it(tmp_path):
     for task, epochs in (("push", 6), ("reach", 4)):
         write_run(tmp_path / "logs" / task, make_config(task, epochs=epochs), np.linspace(0, 1, epochs))
