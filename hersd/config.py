@@ -235,6 +235,8 @@ class BiasConfig:
     epochs: List[int] = field(default_factory=lambda: [1, 2, 5, 10, 20, 30, 50, 75, 100, 150, 200])  # [] never
     episodes: int = 4  # real-goal test episodes per evaluation; each of their states s_t (t < T) is valued
     hindsight_pairs: int = 16  # (s_t, future achieved goal) pairs per evaluation, each valued by a rollout of its own
+    # More such pairs, drawn among those whose goal lies beyond the success radius of ag_t (the object moved)
+    moved_pairs: int = 16
     # Rewards summed into each return: the critic bootstraps through the time limit T, so returns run past
     # it (T + 250 for Fetch's T = 50); the tail left out weighs gamma^return_steps (0.98^300 = 0.0023).
     return_steps: int = 300
@@ -244,6 +246,7 @@ class BiasConfig:
                f"bias.epochs must be a list of epochs >= 1 ([] for never), got {list(self.epochs)}")
         _check(self.episodes >= 1, f"bias.episodes must be >= 1, got {self.episodes}")
         _check(self.hindsight_pairs >= 0, f"bias.hindsight_pairs must be >= 0, got {self.hindsight_pairs}")
+        _check(self.moved_pairs >= 0, f"bias.moved_pairs must be >= 0, got {self.moved_pairs}")
         _check(self.return_steps >= 1, f"bias.return_steps must be >= 1, got {self.return_steps}")
 
 

@@ -83,11 +83,13 @@ EPOCH_FIELDS: dict[str, tuple[str, str]] = {
                                    "(absent if none, or in logs written before it was recorded)"),
     **{f"{part}_{goal}_{stat}": ("integer" if stat == "count" else "number", f"bias evaluation ({goal} goals): {doc} "
                                  "(hersd/bias.py; absent at epochs without one)")
-       for goal in ("real", "hindsight")
+       for goal in ("real", "hindsight", "moved")
        for part, stat, doc in (("bias", "mean", "mean of Q(s, pi(s, g), g) minus the policy's discounted return"),
                                ("bias", "std", "standard deviation of Q minus return"),
                                ("bias", "count", "(state, goal) pairs evaluated"),
                                ("return", "mean", "mean discounted return the policy obtains for g"))},
+    "bias_hindsight_zero_share": ("number", "bias evaluation: share of the hindsight pairs whose return is exactly 0 "
+                                            "(goals already achieved; hersd/bias.py; absent at epochs without one)"),
     "bias_seconds": ("number", "seconds spent on the bias evaluation this epoch (absent at epochs without one)"),
 }
 # Fields a record may lack (absent from the message; read back as None): MEP's, SAC's, and those added

@@ -11,7 +11,7 @@ EVALUATED = [1, 2, 5, 10, 20, 30, 50, 75]
 
 
 def epochs_table(biases: dict[str, list[float]]) -> pd.DataFrame:
-    """Runs of one task: config -> one constant real-goal bias per run (hindsight: minus it), evaluated at
+    """Runs of one task: config -> one constant real-goal bias per run (hindsight: minus it; moved: 3 x), evaluated at
     EVALUATED, with an unevaluated epoch 3 (NaN) between; q_real_mean = 10 * run + epoch."""
     rows, run = [], 0
     for config, values in biases.items():
@@ -21,6 +21,7 @@ def epochs_table(biases: dict[str, list[float]]) -> pd.DataFrame:
                 rows.append({"task": "push", "config": config, "run": run, "epoch": epoch,
                              "bias_real_mean": value if evaluated else np.nan,
                              "bias_hindsight_mean": -value if evaluated else np.nan,
+                             "bias_moved_mean": 3 * value if evaluated else np.nan,
                              "q_real_mean": 10.0 * run + epoch, "q_hindsight_mean": -1.0})
             run += 1
     table = pd.DataFrame(rows)
@@ -34,7 +35,7 @@ def test_integrated_bias_is_the_time_average_over_epochs_1_to_50():
     epochs["bias_real_mean"] = ramp
     table = integrated_bias(epochs)
     assert table.loc[0, "bias_real"] == pytest.approx((50 ** 2 - 1) / 2 / 49)  # integral of k dk / 49 = 25.5
-    assert table.loc[0, "bias_hindsight"] == pytest.approx(-2.0)
+    assert table.loc[0, "bias_hindsight"] == pytest.approx(-2.0) and table.loc[0, "bias_moved"] == pytest.approx(6.0)
     assert np.isnan(integrated_bias(epochs[epochs["epoch"] != 50]).loc[0, "bias_real"])  # not covered: no value
 
 
@@ -45,7 +46,7 @@ def test_bias_tests_are_exact_two_sided_permutation_tests():
     assert real["difference"] == pytest.approx(4.0)
     assert real["p_two_sided"] == pytest.approx(2 / 20)  # 20 splits of 6 runs into 3 + 3; the two extremes
     tied = bias_tests(integrated_bias(epochs_table({"HER": [1.0, 2.0], "linear": [2.0, 1.0]})))
-    assert tied["p_two_sided"].tolist() == [1.0, 1.0]
+    assert tied["p_two_sided"].tolist() == [1.0, 1.0, 1.0]  # real, hindsight and moved goals
 
 
 def test_critic_curves_give_median_and_quartiles_over_seeds():

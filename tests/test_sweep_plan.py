@@ -70,3 +70,19 @@ def test_the_next_campaign_grid_takes_turns_then_adds_the_exponential_and_the_co
     register_schemas()
     cfg = compose("sweep", ["+grid=pnp_push_paper"], job_name="test")
     assert (cfg.epochs, cfg.flush_denormal) == (200, True)
+
+
+def test_the_decay_or_mean_campaign_finishes_the_exponential_then_takes_turns_with_the_control(tmp_path):
+    runs = [Path(directory).relative_to(tmp_path) for _, directory in
+            listed("+grid=decay_or_mean", f"results_dir={tmp_path}")]
+    arms = [(run.parts[0], run.parts[2], int(run.name.split("-")[0].removeprefix("seed"))) for run in runs]
+    exponential, control = "exponential-b1_0.25-b2_0.25", "constant-0.874375"
+    assert arms == [("pick_and_place", exponential, 0), ("pick_and_place", exponential, 1)] + \
+        [arm for seed in range(5) for arm in [("pick_and_place", control, seed)]
+         + ([("pick_and_place", exponential, seed + 2)] if seed < 3 else [])] + \
+        [("push", control, seed) for seed in range(5, 10)] + \
+        [("slide", arm, seed) for seed in range(5) for arm in ("constant-0.8", "linear-b1_0.25")]
+    # the runs it shares with the second campaign are the same folders
+    shared = {Path(directory).relative_to(tmp_path) for _, directory in
+              listed("+grid=pnp_push_paper", f"results_dir={tmp_path}")}
+    assert sum(run in shared for run in runs) == 10
