@@ -34,6 +34,7 @@ import pandas as pd
 
 from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
                                  place_after_curves)
+from analysis.claims import claims_table
 from analysis.critic import bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
@@ -57,6 +58,10 @@ PAGE_TEST_ROWS = 60  # more permutation tests than this stay in their table file
 # the page's run list, one table per task x configuration (its <details> summary names them)
 RUN_PAGE_COLUMNS = ["run_folder", "seed", "state", *RUN_OUTCOME_COLUMNS, "seconds_per_epoch", "cpu"]
 TABLE_NOTES = {
+    "claims": ("The seed paper's claims, each against hersd's measurement on the complete runs here "
+               "(analysis/claims.py): the statistic of both configurations, their seeds, the exact permutation "
+               "test and its p (with the smallest p the seed counts allow), and the verdict those numbers support "
+               f"at the 5 % level. tables/claims.csv; docs/RESULTS.md opens with the same tables."),
     "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
                 "other table: <b>complete seeds</b> counts them, <b>runs in progress</b> the runs left out (not "
                 "complete: running or stopped; they are drawn on their own in the learning curves). "
@@ -214,7 +219,7 @@ def _html_figure(figure: ReportFigure, image: str) -> str:
 
 def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[tuple[ReportFigure, str]],
                studies: Studies, study_images: list[str], animations: dict[str, str],
-               critic_tests: pd.DataFrame) -> str:
+               critic_tests: pd.DataFrame, claims: pd.DataFrame) -> str:
     """The report page: summary tables, figures (the composition table after its figure, each task's
     policy animations after its learning curves), studies, runs."""
     runs = table.runs
@@ -227,6 +232,8 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     if skipped:
         parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")
+    if not claims.empty:
+        parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(claims)]
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
               html_table(_titled(analysis.summary), epochs=_common_epochs(analysis.summary, runs)),
               "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
@@ -424,12 +431,14 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         tables["permutation_tests"] = analysis.tests
     if not (critic_tests := bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))).empty:
         tables["critic_bias_tests"] = critic_tests
+    if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
+        tables["claims"] = claims
     written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
-                                animations, critic_tests), encoding="utf-8")
+                                animations, critic_tests, claims), encoding="utf-8")
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
