@@ -2,7 +2,8 @@
 
 ``hersd-train task=push schedule=linear schedule.beta1=0.25 seed=0 epochs=50``; re-running
 the same command resumes an interrupted run. ``--help`` is generated from the schema
-(:mod:`hersd.config`, each field's comment) and the config groups under ``conf/``.
+(:mod:`hersd.config`, each field's comment), the config groups under ``conf/`` and each schedule class
+(the registered kinds, and a class of your own the command names: ``schedule._target_=<module>.<Class> --help``).
 """
 
 from __future__ import annotations
@@ -57,19 +58,28 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
     return lines
 
 
-def schedule_lines() -> list[str]:
-    """Each schedule kind's formula, then its settings (``schedule.<name>=default  doc``), as its class declares them."""
+def schedule_lines(chosen: list[str] = ()) -> list[str]:
+    """Each schedule kind's formula, then its settings (``schedule.<name>=default  doc``), as its class declares
+    them; after the registered kinds, the classes ``chosen`` by path (``schedule._target_=<module>.<Class>``)."""
     lines = []
-    for kind in known_kinds():
+    for kind in [*known_kinds(), *(path for path in chosen if path not in known_kinds())]:
         cls = schedule_class(kind)
-        lines.append(f"  {kind}: {cls.formula}")
+        lines.append(f"  {kind}: {cls.formula or cls.__doc__.splitlines()[0]}")
         for item in cls.params():
             shown = "null" if item.default is None else item.default
             lines.append(f"    schedule.{item.name}={shown}".ljust(34) + f"  {item.metadata['doc']}")
     return lines
 
 
-def usage() -> str:
+def chosen_schedules(argv: list[str]) -> list[str]:
+    """The schedule classes a command line names by ``schedule._target_=`` or ``schedule.kind=``."""
+    keys = (f"schedule.{TARGET_KEY}", "schedule.kind")
+    return [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
+
+
+def usage(argv: list[str] = ()) -> str:
+    """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
+    with the package's kinds (ConfigError if it cannot be imported)."""
     groups = [f"  {group}={'|'.join(group_options(group))}" for group in GROUPS]
     return "\n".join([
         "usage: hersd-train [KEY=VALUE ...]", "",
@@ -80,7 +90,7 @@ def usage() -> str:
         "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
         *schema_lines(TrainConfig), "",
         "schedules (eps(k): the relabel rate of epoch k = 1..K; schedule=<kind> or schedule.kind=<kind>, then its settings):",
-        *schedule_lines(),
+        *schedule_lines(chosen_schedules(argv)),
     ])
 
 
@@ -98,7 +108,10 @@ def main(argv: list[str] | None = None) -> None:
 
     argv = sys.argv[1:] if argv is None else argv
     if any(arg in ("-h", "--help") for arg in argv):
-        print(usage())
+        try:
+            print(usage(argv))
+        except ConfigError as err:
+            _fail(str(err))
         return
     try:
         cfg = compose_train(argv)

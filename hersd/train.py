@@ -201,7 +201,7 @@ def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
 def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
     """Epoch k of Algorithm 1 -> its log record."""
     cfg = state.cfg
-    stats = EpochStats(epoch, cfg.schedule.rate(epoch, cfg.epochs, state.train_success))
+    stats = EpochStats(epoch, cfg.schedule.checked_rate(epoch, cfg.epochs, state.train_success))
     if state.prioritizer is not None:  # refit the density on the episodes stored so far (none in epoch 1)
         with stats.timed("mep_fit"):
             state.prioritizer.fit(state.buffer.stored().achieved, state.rng)

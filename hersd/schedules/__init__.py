@@ -8,13 +8,13 @@ a hindsight goal during epoch k (1..K), one class per kind, one file each:
 - cosine.py       eps(k) = end + (start - end) * (1 + cos(pi k / K)) / 2
 - table.py        eps(k) = rates[k - 1], inline, from a file or from another run's log
 
-Each declares its parameters (ranges, docs), rate, exact mean rate (None when it adapts), folder
-tag and label (:class:`Schedule`, base.py); :mod:`registry` maps kind names to classes, including
+Each declares its parameters (ranges, docs), rate (checked in [0, 1]), exact mean rate (None when it
+adapts), folder tag and label (defaults: its class name and settings) (:class:`Schedule`, base.py); :mod:`registry` maps kind names to classes, including
 other packages' (entry point group ``hersd.schedules``) and any class by path (``_target_``).
 The paper's equations 9-11 are in equations.py. Imports neither torch nor the config.
 """
 
-from hersd.schedules.base import FLAT_RECORD, Schedule, kind_name, param
+from hersd.schedules.base import FLAT_RECORD, Schedule, ScheduleRateError, kind_name, param
 from hersd.schedules.constant import Constant
 from hersd.schedules.cosine import Cosine
 from hersd.schedules.equations import (BETA2_LIMIT, MU_EPS_BAND, beta1_for_mean_rate, decay_rate, mean_rate_approx,
@@ -22,11 +22,11 @@ from hersd.schedules.equations import (BETA2_LIMIT, MU_EPS_BAND, beta1_for_mean_
 from hersd.schedules.exponential import Exponential
 from hersd.schedules.linear import Linear
 from hersd.schedules.registry import (DEFAULT, ENTRY_POINT_GROUP, SCHEDULES, TARGET_KEY, known_kinds, registered,
-                                      schedule_class, schedule_from_config, schedule_from_record, schedule_rank)
+                                      schedule_class, schedule_from_config, schedule_from_record, schedule_rank, settle)
 from hersd.schedules.success import Success
 from hersd.schedules.table import Table
 
 __all__ = ["BETA2_LIMIT", "Constant", "Cosine", "DEFAULT", "Exponential", "Linear", "Success", "Table", "ENTRY_POINT_GROUP", "FLAT_RECORD", "MU_EPS_BAND", "SCHEDULES", "Schedule",
-           "TARGET_KEY", "beta1_for_mean_rate", "decay_rate", "kind_name", "known_kinds", "mean_rate_approx",
+           "ScheduleRateError", "TARGET_KEY", "beta1_for_mean_rate", "decay_rate", "kind_name", "known_kinds", "mean_rate_approx",
            "mean_rate_exact", "param", "registered", "schedule_class", "schedule_from_config", "schedule_from_record",
-           "schedule_rank"]
+           "schedule_rank", "settle"]

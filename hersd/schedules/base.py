@@ -4,14 +4,18 @@ A schedule is a dataclass whose fields are its parameters, each made by :func:`p
 range and a one-line doc: they are the ``schedule.<name>`` keys of ``hersd-train --help``, the
 range checks (one-line :class:`ConfigError` naming the field) and the search's default range.
 Its methods give the rate of epoch k of K, the exact mean rate (None when it adapts to the
-run), the folder tag, the report's label and the record logs keep (the run's identity).
-Imports neither torch nor the config: every layer can use it.
+run), the folder tag and the report's label (both by default from the class name and its settings),
+the kind it equals (:meth:`Schedule.equivalent`) and the record logs keep (the run's identity).
+Every rate must lie in [0, 1]: a fixed schedule's are checked when its config is built
+(:func:`settle`), an adaptive one's at each epoch (:meth:`Schedule.checked_rate`), one
+:class:`ScheduleRateError` line naming the epoch. Imports neither torch nor the config: every layer can use it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Sequence
 
@@ -24,6 +28,10 @@ from hersd.errors import ConfigError
 # were written, and their folders' hashes cover these fields (hersd.runstore.run_identity).
 FLAT_RECORD: dict[str, Any] = {"eps": 0.8, "beta1": 0.0, "beta2": 0.0, "mean_rate": None, "window": 10,
                                "eps_min": 0.0}
+
+
+class ScheduleRateError(ConfigError):
+    """A schedule gave a rate outside [0, 1]; the message is one line naming the schedule and the epoch."""
 
 
 def param(default: Any, low: float, high: float, doc: str, integer: bool = False, optional: bool = False) -> Any:
@@ -67,6 +75,19 @@ class Schedule:
         train success of epochs 1..k-1 (adaptive schedules read it)."""
         raise NotImplementedError
 
+    def checked_rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
+        """:meth:`rate`, or ScheduleRateError (one line) when it is not a number in [0, 1]."""
+        rate = self.rate(k, total_epochs, train_success)
+        if not (isinstance(rate, (int, float, np.floating)) and 0.0 <= rate <= 1.0):  # NaN fails too
+            raise ScheduleRateError(f"schedule {self.label()}: its rate at epoch {k} of {total_epochs} is {rate}, "
+                                    f"not in [0, 1]; fix {kind_name(type(self))}.rate")
+        return float(rate)
+
+    def equivalent(self) -> Schedule:
+        """The schedule of the kind it equals when its settings make it one (exponential with beta2 = 0 is
+        linear), so that its runs are that kind's runs; else itself."""
+        return self
+
     def epoch_rates(self, total_epochs: int) -> np.ndarray:
         """eps(k) for k = 1..K, shape (K,); only for schedules that do not adapt."""
         return np.array([self.rate(k, total_epochs) for k in range(1, total_epochs + 1)], dtype=float)
@@ -80,17 +101,24 @@ class Schedule:
         return None
 
     def tag(self) -> str:
-        """The folder a run of it lives in, below <task>/<algo>/, e.g. ``linear-b1_0.25``."""
-        raise NotImplementedError
+        """The folder a run of it lives in, below <task>/<algo>/, e.g. ``linear-b1_0.25``; by default the
+        class name and each setting, ``step-high_0.9-low_0.4-k0_5`` (characters a folder name avoids as ``_``)."""
+        words = [short_name(type(self)), *(f"{name}_{shown_value(value)}" for name, value in self.settings())]
+        return re.sub(r"[^A-Za-z0-9._=-]", "_", "-".join(words))
 
     def label(self) -> str:
-        """Its name in the report, e.g. ``linear b1=0.25``."""
-        raise NotImplementedError
+        """Its name in the report, e.g. ``linear b1=0.25``; by default the class name and each setting,
+        ``step high=0.9 low=0.4 k0=5``."""
+        return " ".join([short_name(type(self)), *(f"{name}={shown_value(value)}" for name, value in self.settings())])
+
+    def settings(self) -> list[tuple[str, Any]]:
+        """(name, value) of each parameter, in declaration order."""
+        return [(item.name, getattr(self, item.name)) for item in self.params()]
 
     def record(self) -> dict[str, Any]:
         """The schedule as a log's ``/run/meta`` config holds it and the run's identity hashes it:
         ``kind`` and every parameter (and FLAT_RECORD's fields for the paper's kinds)."""
-        own = {item.name: getattr(self, item.name) for item in self.params()}
+        own = dict(self.settings())
         return {"kind": kind_name(type(self)), **(FLAT_RECORD if self.flat_record else {}), **own}
 
 
@@ -98,6 +126,25 @@ def kind_name(cls: type[Schedule]) -> str:
     """The kind a schedule class is recorded under: the ``kind`` it declares itself (not one it inherits, so a
     subclass of a registered kind is not taken for it), else its import path."""
     return cls.__dict__.get("kind") or f"{cls.__module__}.{cls.__qualname__}"
+
+
+def short_name(cls: type[Schedule]) -> str:
+    """A schedule class's name in default tags and labels: its kind, else its class name in lower case."""
+    return cls.__dict__.get("kind") or cls.__name__.lower()
+
+
+def shown_value(value: Any) -> str:
+    """A setting as default tags and labels write it: numbers as ``:g`` (0.25, 5), null, else str."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:g}"
+    return "null" if value is None else str(value)
+
+
+def check_rates(schedule: Schedule, total_epochs: int) -> None:
+    """ScheduleRateError (one line) unless a fixed schedule's rate of every epoch 1..total_epochs is in [0, 1]."""
+    if not schedule.adaptive:
+        for k in range(1, total_epochs + 1):
+            schedule.checked_rate(k, total_epochs)
 
 
 def check_param(item: dataclasses.Field, value: Any) -> None:

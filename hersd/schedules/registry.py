@@ -9,7 +9,7 @@ from importlib.metadata import entry_points
 from typing import Any, Mapping
 
 from hersd.errors import ConfigError
-from hersd.schedules.base import Schedule
+from hersd.schedules.base import Schedule, check_rates
 from hersd.schedules.constant import Constant
 from hersd.schedules.cosine import Cosine
 from hersd.schedules.exponential import Exponential
@@ -51,12 +51,16 @@ def schedule_class(kind: str) -> type[Schedule]:
                           f"or a class: schedule.{TARGET_KEY}=<module>.<Class>")
     if not (isinstance(cls, type) and issubclass(cls, Schedule)):
         raise ConfigError(f"schedule {kind} is not a hersd.schedules.Schedule subclass")
+    if cls.rate is Schedule.rate:
+        raise ConfigError(f"schedule {kind} defines no rate(self, k, total_epochs, train_success=()); "
+                          "a schedule needs it (tag and label have defaults)")
     return cls
 
 
 def schedule_from_config(node: Mapping[str, Any], total_epochs: int) -> Schedule:
     """A config's ``schedule`` mapping (``kind`` or ``_target_`` and the parameters) -> the resolved schedule of
-    a run of total_epochs; ConfigError (one line) for an unknown kind, a setting it lacks or a value out of range."""
+    a run of total_epochs (:func:`settle`); ConfigError (one line) for an unknown kind, a setting it lacks, a
+    value out of range or a rate outside [0, 1]."""
     settings = dict(node)
     target, kind = settings.pop(TARGET_KEY, None), settings.pop("kind", None)
     cls = schedule_class(target or kind) if target or kind else DEFAULT
@@ -65,8 +69,15 @@ def schedule_from_config(node: Mapping[str, Any], total_epochs: int) -> Schedule
     if unknown:
         raise ConfigError(f"schedule.{unknown[0]} is not a setting of schedule {target or kind or DEFAULT.kind}; "
                           f"its settings: {', '.join(names) or 'none'}")
-    schedule = cls(**settings)
+    return settle(cls(**settings), total_epochs)
+
+
+def settle(schedule: Schedule, total_epochs: int) -> Schedule:
+    """The schedule a run of total_epochs uses: the kind it equals (:meth:`Schedule.equivalent`), resolved for
+    total_epochs, its rates checked in [0, 1] if it does not adapt (ScheduleRateError, one line)."""
+    schedule = schedule.equivalent()
     schedule.resolve(total_epochs)
+    check_rates(schedule, total_epochs)
     return schedule
 
 
