@@ -141,7 +141,8 @@ def _measured(claim: Claim, summary: pd.DataFrame, bias_tests: pd.DataFrame):
              (claim.config, claim.versus)]
     if any(len(part) != 1 or part["seeds"].iloc[0] < 2 for part in found):
         return None
-    return tuple(float(part[column].iloc[0]) for part in found), tuple(int(part["seeds"].iloc[0]) for part in found)
+    values = tuple(part[column].iloc[0] for part in found)  # NA where the median never reached the level
+    return tuple(math.nan if pd.isna(v) else float(v) for v in values), tuple(int(part["seeds"].iloc[0]) for part in found)
 
 
 def _one_sided(claim: Claim, tests: pd.DataFrame) -> tuple[float, float]:

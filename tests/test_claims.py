@@ -45,6 +45,13 @@ def test_a_one_sided_claim_gets_the_verdict_its_p_and_direction_support(linear, 
     assert f"{linear} ({LINEAR_025}) vs {her} ({HER})" in row["hersd"]
 
 
+def test_a_level_never_reached_reads_never():
+    table = summary_table(100, 140).astype({"epochs_to_0.9": "Int64"})
+    table.loc[1, "epochs_to_0.9"] = pd.NA  # HER's median never reached 0.9
+    row = claims_table(table, permutation_table(0.01, 0.99), NO_BIAS, (FASTER,)).iloc[0]
+    assert f"100 ({LINEAR_025}) vs never ({HER})" in row["hersd"] and row["verdict"] == "reproduced"
+
+
 def test_an_alike_claim_is_two_sided_and_says_its_power():
     row = claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS, (ALIKE,)).iloc[0]
     assert row["p"] == pytest.approx(0.6)  # twice the smaller one-sided p, 0.3
