@@ -15,9 +15,11 @@ Vocabulary (each formula is restated in docs/ANALYSIS.md):
 from __future__ import annotations
 
 import json
+import math
 import warnings
 from collections import defaultdict
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 import pandas as pd
@@ -43,6 +45,7 @@ SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "au
                    *(f"raw_epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
                    f"p_improve_{BASELINE}"]
 
+RUN_AUC = "auc"  # besides RUN_OUTCOME_COLUMNS in run_outcomes: a run's mean raw test success over its epochs
 RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix in ("", "raw_")
                                   for threshold in SUCCESS_THRESHOLDS)]
 
@@ -54,58 +57,134 @@ PERMUTATION_BATCH = 64  # splits evaluated at once: bounds memory for a large gr
 PERMUTATION_COLUMNS = ["task", "config", "versus", "seeds", "versus_seeds",
                        *(f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS)]
 
-SMOOTHED_DECIMALS = 12  # far finer than any success rate (a fraction of test episodes), far coarser than float noise
+SMOOTHED_DECIMALS = 12  # without a grid (below): far finer than any success rate, far coarser than float noise
+# Test success is k/n (n test episodes, 20 by default): the grid. A value within GRID_TOLERANCE of a fraction
+# with a denominator up to MAX_TEST_EPISODES is that fraction; the grid of a table is the least common
+# denominator of its values (at most MAX_GRID, else it has none).
+MAX_TEST_EPISODES = 10_000
+MAX_GRID = 1_000_000
+GRID_TOLERANCE = 1e-12
+
+
+def success_grid(success: np.ndarray) -> float:
+    """D, the least common denominator of the test-success values (shape (n,)), so that every value times D
+    is a whole number (20 for 20 test episodes); NaN when a value is no fraction k/n with n <= MAX_TEST_EPISODES
+    (within GRID_TOLERANCE) or D would exceed MAX_GRID."""
+    denominator = 1
+    for value in np.unique(np.asarray(success, dtype=float)):
+        if not np.isfinite(value):
+            continue
+        fraction = Fraction(float(value)).limit_denominator(MAX_TEST_EPISODES)
+        denominator = math.lcm(denominator, fraction.denominator)
+        if abs(float(fraction) - value) > GRID_TOLERANCE or denominator > MAX_GRID:
+            return float("nan")
+    return float(denominator)
+
+
+def on_grid(values, denominators) -> np.ndarray:
+    """Each value (shape (n,) or scalar) made the float nearest the multiple of 1/denominator it stands for:
+    its exact fraction, rounded once (a median or mean of such values computed in floats may lie 1e-16 below
+    it: 0.85 and 0.95 average to 0.8999999999999999). Where a denominator is NaN (no grid), the value rounded
+    to SMOOTHED_DECIMALS instead."""
+    values, denominators = np.asarray(values, dtype=float), np.asarray(denominators, dtype=float)
+    with np.errstate(invalid="ignore"):
+        snapped = np.round(values * denominators) / denominators
+    return np.where(np.isnan(denominators), np.round(values, SMOOTHED_DECIMALS), snapped)
+
+
+def grid_mean(values: np.ndarray, denominators: np.ndarray) -> float:
+    """The exact mean of ``values`` (shape (n,)), each a multiple of 1/its denominator (shape (n,)), rounded once:
+    summed as fractions; the float mean rounded to SMOOTHED_DECIMALS when a denominator is NaN."""
+    values, denominators = np.asarray(values, dtype=float), np.asarray(denominators, dtype=float)
+    if len(values) == 0:
+        return float("nan")
+    if np.isnan(denominators).any():
+        return float(np.round(values.mean(), SMOOTHED_DECIMALS))
+    distinct, which = np.unique(denominators, return_inverse=True)
+    numerators = np.bincount(which, weights=np.round(values * denominators))  # whole numbers, exact below 2**53
+    total = sum(Fraction(int(numerator), int(denominator)) for numerator, denominator in zip(numerators, distinct))
+    return float(total / len(values))
+
+
+def grid_median(values: np.ndarray, denominator: float) -> float:
+    """The exact median of ``values`` (shape (n,)), all multiples of 1/denominator: the mean of the two middle
+    values of an even count lies on the grid 1/(2 denominator)."""
+    return float(on_grid(np.median(values), 2 * denominator)) if len(values) else float("nan")
+
+
+def common_grid(grids) -> float:
+    """The least common multiple of denominators (whole numbers as floats): a grid all their values lie on;
+    NaN when one is NaN."""
+    grids = np.asarray(grids, dtype=float)
+    return float("nan") if np.isnan(grids).any() or len(grids) == 0 else float(np.lcm.reduce(grids.astype(np.int64)))
 
 
 def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
-    """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1), rounded to
-    SMOOTHED_DECIMALS: pandas' running sum leaves float noise (a window of exactly 25 of 50 came out as
-    0.49999999999999994), which would put the first epoch reaching 0.5 one epoch late.
+    """Per run, the trailing mean of test_success over ``window`` epochs (min_periods=1), exact: each value is
+    the sum of the test successes in its window over the number of epochs it averages, made the float nearest
+    that fraction (:func:`on_grid`; pandas' running sum alone gave 0.49999999999999994 for 25 of 50).
 
-    ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, complete, epoch,
-    success (raw), smoothed; sorted by run then epoch.
+    ``epochs``: the tidy epoch table. Returns columns task, config, run, seed, complete, epoch, success (raw),
+    smoothed, success_grid (D of :func:`success_grid`, the same for every row; NaN: none) and
+    smoothed_grid (D times the epochs the value averages: its denominator); sorted by run then epoch.
     """
     if window < 1:
         raise ValueError(f"the smoothing window must be >= 1 epoch, got {window}")
     curves = epochs[["task", "config", "run", "seed", "complete", "epoch", "test_success"]].sort_values(["run", "epoch"])
     curves = curves.rename(columns={"test_success": "success"}).reset_index(drop=True)
-    rolling = curves.groupby("run", sort=False)["success"].rolling(window, min_periods=1).mean()
-    curves["smoothed"] = rolling.to_numpy().round(SMOOTHED_DECIMALS)
+    grid = success_grid(curves["success"].to_numpy())
+    curves["success"] = on_grid(curves["success"].to_numpy(), grid)
+    by_run = curves.groupby("run", sort=False)
+    rolling = by_run["success"].rolling(window, min_periods=1).mean()
+    curves["success_grid"] = grid
+    curves["smoothed_grid"] = grid * np.minimum(by_run.cumcount().to_numpy() + 1, window)
+    curves["smoothed"] = on_grid(rolling.to_numpy(), curves["smoothed_grid"].to_numpy())
     return curves
 
 
 def median_curves(curves: pd.DataFrame) -> pd.DataFrame:
     """Per (task, config, epoch): median, low (min), high (max) of ``smoothed`` over seeds, n_seeds,
-    and raw_median (the median of the raw, unsmoothed success)."""
+    raw_median (the median of the raw, unsmoothed success) and median_grid (the denominator of median:
+    2 smoothed_grid), medians exact (:func:`grid_median`)."""
     grouped = curves.groupby([*GROUP, "epoch"], observed=True)
     summary = grouped["smoothed"].agg(median="median", low="min", high="max", n_seeds="count")
     summary["raw_median"] = grouped["success"].median()
+    grids = grouped[["success_grid", "smoothed_grid"]].agg(["min", "max"])
+    for column in ("success_grid", "smoothed_grid"):  # seeds averaging different epochs: no common grid
+        grids[(column, "min")] = grids[(column, "min")].where(grids[(column, "min")] == grids[(column, "max")])
+    summary["median_grid"] = 2 * grids[("smoothed_grid", "min")]
+    summary["median"] = on_grid(summary["median"].to_numpy(), summary["median_grid"].to_numpy())
+    summary["raw_median"] = on_grid(summary["raw_median"].to_numpy(), 2 * grids[("success_grid", "min")].to_numpy())
     return summary.reset_index()
 
 
 def final_success(curves: pd.DataFrame) -> pd.DataFrame:
     """Per seed: its smoothed curve at its last epoch (``curves``: :func:`smoothed_curves` of complete runs).
 
-    Returns columns task, config, run, seed, final.
+    Returns columns task, config, run, seed, final, final_grid (its denominator).
     """
     last = curves.sort_values(["run", "epoch"]).groupby("run", sort=False).tail(1)
-    return last[[*GROUP, "run", "seed", "smoothed"]].rename(columns={"smoothed": "final"}).reset_index(drop=True)
+    return (last[[*GROUP, "run", "seed", "smoothed", "smoothed_grid"]]
+            .rename(columns={"smoothed": "final", "smoothed_grid": "final_grid"}).reset_index(drop=True))
 
 
 def run_outcomes(curves: pd.DataFrame) -> pd.DataFrame:
     """Per run, in progress or complete (``curves``: :func:`smoothed_curves`): ``final``, its smoothed
     success at its last epoch so far; ``epochs_to_0.5 / 0.9``, the first epoch its smoothed curve
-    reaches it, and ``raw_epochs_to_0.5 / 0.9`` its raw test success (NaN: not reached).
+    reaches it, and ``raw_epochs_to_0.5 / 0.9`` its raw test success (NaN: not reached); ``auc``, the mean
+    of its raw test success over its epochs so far (exact: on the grid of D times its epochs).
 
-    Returns columns run, then RUN_OUTCOME_COLUMNS, one row per run in ``curves``.
+    Returns columns run, then RUN_OUTCOME_COLUMNS, then auc; one row per run in ``curves``.
     """
     by_run = curves.groupby("run", sort=True)
     table = pd.DataFrame({"final": by_run["smoothed"].last()})
+    auc_grid = by_run["success_grid"].first() * by_run.size()
     for prefix, column in (("", "smoothed"), ("raw_", "success")):
         for threshold in SUCCESS_THRESHOLDS:
             reached = curves[curves[column] >= threshold].groupby("run")["epoch"].min()
             table[f"{prefix}epochs_to_{threshold:g}"] = reached.reindex(table.index).astype("Int64")
-    return table.rename_axis("run").reset_index()[["run", *RUN_OUTCOME_COLUMNS]]
+    table[RUN_AUC] = on_grid(by_run["success"].mean().to_numpy(), auc_grid.to_numpy())
+    return table.rename_axis("run").reset_index()[["run", *RUN_OUTCOME_COLUMNS, RUN_AUC]]
 
 
 def run_states(runs: pd.DataFrame) -> pd.Series:
@@ -120,11 +199,14 @@ def first_epoch_reaching(epoch: np.ndarray, values: np.ndarray, threshold: float
     return float(epoch[reached[0]]) if len(reached) else float("nan")
 
 
-def interquartile_mean(values: np.ndarray) -> float:
-    """Mean of the middle 50 %: scipy.stats.trim_mean(values, 0.25)."""
+def interquartile_mean(values: np.ndarray, denominator: float = float("nan")) -> float:
+    """Mean of the middle 50 % (shape (n,)): scipy.stats.trim_mean(values, 0.25), which drops int(n / 4) values
+    at each end; exact (:func:`on_grid`) when every value is a multiple of 1/denominator."""
     from scipy import stats  # scipy.stats takes most of a second to import: only when computing
 
-    return float(stats.trim_mean(np.asarray(values, dtype=float), 0.25))
+    values = np.asarray(values, dtype=float)
+    kept = len(values) - 2 * int(0.25 * len(values))
+    return float(on_grid(stats.trim_mean(values, 0.25), kept * denominator))
 
 
 def iqm_interval(strata: list[np.ndarray], seed: int = BOOTSTRAP_SEED,
@@ -194,7 +276,10 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
     :func:`her_baselines` HER configuration; NaN without one).
     """
     baselines = her_baselines(runs[runs["complete"]])
-    finals = {key: group["final"].to_numpy() for key, group in final_success(curves).groupby(GROUP, observed=True)}
+    finals, grids = {}, {}
+    for key, group in final_success(curves).groupby(GROUP, observed=True):
+        finals[key] = group["final"].to_numpy()
+        grids[key] = common_grid(group["final_grid"])
     in_progress = (~runs["complete"]).groupby([runs["task"], runs["config"]], observed=True).sum()
     rows = []
     for (task, config), median in median_curves(curves).groupby(GROUP, observed=True, sort=True):
@@ -202,13 +287,14 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
         low, high = iqm_interval([final], seed=seed)
         row = {
             "task": task, "config": config, "seeds": len(final), "in_progress": int(in_progress[(task, config)]),
-            "final_median": float(np.median(final)), "auc": float(median["median"].mean()),
+            "final_median": grid_median(final, grids[(task, config)]),
+            "auc": grid_mean(median["median"].to_numpy(), median["median_grid"].to_numpy()),
         }
         for threshold in SUCCESS_THRESHOLDS:
             for prefix, column in (("", "median"), ("raw_", "raw_median")):
                 row[f"{prefix}epochs_to_{threshold:g}"] = first_epoch_reaching(
                     median["epoch"].to_numpy(), median[column].to_numpy(), threshold)
-        row.update(iqm=interquartile_mean(final), iqm_low=low, iqm_high=high)
+        row.update(iqm=interquartile_mean(final, grids[(task, config)]), iqm_low=low, iqm_high=high)
         baseline = baselines.get((task, config))
         row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
                                         if (task, baseline) in finals else float("nan"))
@@ -232,6 +318,7 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
     baselines = her_baselines(runs[runs["complete"]])
     finals = final_success(curves)
     per_task = {key: group["final"].to_numpy() for key, group in finals.groupby(GROUP, observed=True)}
+    grids = finals.groupby("config", observed=True)["final_grid"].agg(common_grid)
     rows = []
     for config, group in finals.groupby("config", observed=True, sort=True):
         tasks = list(dict.fromkeys(group["task"]))
@@ -240,7 +327,7 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
         improvements = [probability_of_improvement(per_task[(task, config)], per_task[(task, baselines[(task, config)])])
                         for task in tasks if (task, baselines.get((task, config))) in per_task]
         rows.append({"config": config, "tasks": len(tasks), "seeds": int(sum(len(s) for s in strata)),
-                     "iqm": interquartile_mean(np.concatenate(strata)), "iqm_low": low, "iqm_high": high,
+                     "iqm": interquartile_mean(np.concatenate(strata), grids[config]), "iqm_low": low, "iqm_high": high,
                      f"p_improve_{BASELINE}": float(np.mean(improvements)) if improvements else float("nan")})
     return pd.DataFrame.from_records(rows, columns=["config", "tasks", "seeds", "iqm", "iqm_low", "iqm_high",
                                                     f"p_improve_{BASELINE}"])

@@ -118,6 +118,29 @@ def test_a_smoothed_window_of_exactly_half_successes_reaches_half_at_that_epoch(
     assert metrics.first_epoch_reaching(curve["epoch"].to_numpy(), curve["smoothed"].to_numpy(), 0.5) == 75
 
 
+def test_medians_of_an_even_number_of_seeds_straddling_a_threshold_reach_it_exactly(tmp_path):
+    """Four seeds whose two middle raw successes are 0.85 and 0.95 from epoch 2 on (17 and 19 of 20 test
+    episodes): their median is exactly 0.9, reached at epoch 2 (raw) and 3 (2-epoch average), though the two
+    floats average to 0.8999999999999999. Final success and IQM (the middle two) are exactly 0.9 too."""
+    for seed, level in enumerate([0.8, 0.85, 0.95, 1.0]):
+        write_run(tmp_path / str(seed), make_config(seed=seed, epochs=4), np.array([0.0, level, level, level]))
+    assert (0.85 + 0.95) / 2 < 0.9
+    summary = metrics.analyse(*_tables(tmp_path), window=2).summary.iloc[0]
+    assert summary[["raw_epochs_to_0.9", "epochs_to_0.9"]].fillna(0).tolist() == [2, 3]  # 0: never
+    assert summary["final_median"] == 0.9 and summary["iqm"] == 0.9
+    assert summary["auc"] == (0.0 + 0.45 + 0.9 + 0.9) / 4  # the median curve: 0, (0.425 + 0.475) / 2, 0.9, 0.9
+
+
+def test_the_success_grid_is_the_least_common_denominator_of_the_success_rates():
+    assert metrics.success_grid(np.array([0.0, 0.05, 0.3, 1.0])) == 20
+    assert metrics.success_grid(np.array([0.5, 1 / 3, 0.6000000000000001])) == 30  # np.linspace's 0.6
+    assert math.isnan(metrics.success_grid(np.array([0.25, 0.1234567891])))  # not k/n with n <= 10000
+    assert metrics.on_grid(np.array([0.8999999999999999, 0.123]), np.array([40.0, np.nan])).tolist() == [0.9, 0.123]
+    thirds = np.array([1 / 3] * 3 + [2 / 3] * 3)  # six values on the grid of 1/3 and their mean, 1/2
+    assert metrics.grid_mean(thirds, np.full(6, 3.0)) == 0.5
+    assert metrics.grid_mean(np.array([0.1, 0.2, 0.3]), np.array([10.0, 5.0, 10.0])) == 0.2  # floats: 0.20000000000000004
+
+
 def test_bootstrap_interval_is_seeded_and_stratified():
     values = [np.random.default_rng(7).uniform(size=12)]
     first = metrics.iqm_interval(values, seed=3)
