@@ -214,6 +214,19 @@ def test_the_readme_opening_gives_fetchpickandplaces_numbers_as_the_committed_ta
     assert f"0.5 first reached at epoch {linear['epochs_to_0.5']:.0f} against {her['epochs_to_0.5']:.0f}" in text
 
 
+def test_the_readme_opening_quotes_every_measured_row_of_the_committed_claims_table():
+    """README.md's list of the paper's claims: each row of tables/claims.csv with a verdict, worded as the table
+    words it (claim, figure, verdict, p as the claims markdown rounds it, seeds)."""
+    root = Path(__file__).resolve().parent.parent
+    text = " ".join((root / "README.md").read_text(encoding="utf-8").split("\nHindsight experience replay")[0].split())
+    claims = pd.read_csv(root / "results/report/tables/claims.csv", dtype=str, keep_default_na=False)
+    measured = claims[claims["verdict"] != "not measured yet"]
+    assert len(measured) > 0
+    tasks = {"push": "FetchPush", "pick_and_place": "FetchPickAndPlace", "slide": "FetchSlide"}
+    for row in measured.itertuples():
+        assert (f"- {tasks[row.task]}, {row.claim} ({row.paper}): {row.verdict} "
+                f"(p = {float(row.p):.2g}, {row.seeds} seeds).") in text, row.claim
+
 def test_the_summary_header_names_the_epoch_of_final_success_when_the_rows_share_it(tmp_path):
     for task, epochs in (("push", 6), ("reach", 4)):
         write_run(tmp_path / "logs" / task, make_config(task, epochs=epochs), np.linspace(0, 1, epochs))
