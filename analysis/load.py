@@ -5,7 +5,9 @@ when there are many: :func:`start_reading`) into a :class:`RunTable`:
 
 - ``runs``: one row per run (columns: :data:`RUN_COLUMNS`);
 - ``epochs``: one row per run x completed epoch: the run's columns, then every field of
-  :data:`hersd.runlog.EPOCH_FIELDS`.
+  :data:`hersd.runlog.EPOCH_FIELDS`;
+- ``sessions``: one row per run x training session: its commit, machine, threads, times
+  (:func:`analysis.provenance.session_table`).
 
 A run's *configuration* label (column ``config``) names what its seeds have in common, so
 seeds are grouped by ``(task, config)``; see :func:`config_label`. Runs that share a label
@@ -23,6 +25,7 @@ from typing import Any, Iterable, NamedTuple
 import numpy as np
 import pandas as pd
 
+from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
 from hersd.config import AlgoConfig
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
@@ -76,6 +79,7 @@ class RunTable:
     runs: pd.DataFrame
     epochs: pd.DataFrame
     skipped: list[str] = field(default_factory=list)
+    sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg") -> str:
@@ -156,6 +160,7 @@ class ReadLog(NamedTuple):
     row: dict[str, Any]
     settings: dict[str, Any]
     columns: dict[str, np.ndarray]
+    sessions: list[dict[str, Any]] = []  # analysis.provenance.session_rows
 
 
 def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -210,7 +215,7 @@ def read_log(path: Path, folder: Path) -> ReadLog | str:
     columns = _epoch_columns(log.records)
     if row["adaptive"] and log.records:  # placed by the rate it realised
         row["mu_eps"] = float(np.mean(columns["relabel_rate"]))
-    return ReadLog(row, settings, columns)
+    return ReadLog(row, settings, columns, session_rows(log.sessions, [(m.topic, m.log_time) for m in log.messages]))
 
 
 def find_logs(folder: Path) -> list[Path]:
@@ -295,4 +300,4 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     epochs = runs.take(run_of_row).reset_index(drop=True)
     for name in EPOCH_FIELDS:
         epochs[name] = np.concatenate([log.columns[name] for log in logs])
-    return RunTable(runs=runs, epochs=epochs, skipped=skipped)
+    return RunTable(runs=runs, epochs=epochs, skipped=skipped, sessions=session_table([log.sessions for log in logs]))

@@ -10,6 +10,7 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
     tables/permutation_tests.csv|.md  per task, one-sided permutation tests between configurations' seeds
     tables/runs.csv              the runs behind them
+    tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates
     search/<study>_*             each Optuna study's beta-plane figure and best trials
 
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
@@ -38,6 +39,7 @@ from analysis.claims import claims_table
 from analysis.critic import bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
+from analysis.provenance import provenance_html, provenance_table
 from analysis.studies import StudyStorage, open_study_storage
 from hersd.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
@@ -219,7 +221,7 @@ def _html_figure(figure: ReportFigure, image: str) -> str:
 
 def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[tuple[ReportFigure, str]],
                studies: Studies, study_images: list[str], animations: dict[str, str],
-               critic_tests: pd.DataFrame, claims: pd.DataFrame) -> str:
+               critic_tests: pd.DataFrame, claims: pd.DataFrame, provenance: pd.DataFrame) -> str:
     """The report page: summary tables, figures (the composition table after its figure, each task's
     policy animations after its learning curves), studies, runs."""
     runs = table.runs
@@ -257,7 +259,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
-    parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", *_runs_html(analysis)]
+    parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", *_runs_html(analysis), *provenance_html(provenance)]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
 
@@ -433,12 +435,13 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         tables["critic_bias_tests"] = critic_tests
     if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
         tables["claims"] = claims
+    tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
     written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
     written += _write_studies(studies, out / "search")
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
-                                animations, critic_tests, claims), encoding="utf-8")
+                                animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
