@@ -20,8 +20,6 @@ matplotlib.use("Agg")
 
 import pandas as pd  # noqa: E402
 from matplotlib import colormaps  # noqa: E402
-from matplotlib.cm import ScalarMappable  # noqa: E402
-from matplotlib.colors import Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
@@ -532,97 +530,76 @@ def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_
     return figure
 
 
-# --- Fig. 12: mean relabel rate ----------------------------------------------------------------------------------
+# --- Fig. 12: outcome against the mean relabel rate -------------------------------------------------------------
+
+MEAN_RATE_PANELS = ((metrics.RUN_AUC, "AUC: mean raw test success over the K epochs", "AUC"),
+                    ("epochs_to_0.5", "first epoch the moving average reaches 0.5 success", "epoch"))
+MEAN_RATE_MARKERS = {"constant": "s", "fixed": "o", "adaptive": "D"}
+DODGE = 0.025  # arms at one mu_eps are drawn side by side, this share of the x axis apart
+
 
 def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
-    """Fig. 12: per task, mu_eps against beta1 for each beta2 present (eq. 10 and 11), the
-    optimal band shaded, one marker per decay configuration coloured by its final median success."""
-    complete = analysis.runs[analysis.runs["complete"]]
-    mean_rates = complete.groupby(["task", "config"], observed=True)["mu_eps"].median().reset_index()
-    summary = (analysis.summary.merge(_config_table(analysis).reset_index(), on="config")
-               .merge(mean_rates, on=["task", "config"]))
-    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]  # placed in the beta1 plane
-    beta2_colours = {beta2: PALETTE[i % len(PALETTE)]
-                     for i, beta2 in enumerate(sorted(set(decays.loc[_eq9(decays), "beta2"])))}
+    """Fig. 12 from outcomes: per task with complete runs, every configuration's seeds (raw AUC, smoothed epochs
+    to 0.5) against its mu_eps, the median over seeds and their range, the paper's band shaded."""
+    seeds, arms = metrics.mean_rate_outcomes(analysis.runs, analysis.outcomes)
+    styles = config_styles(analysis)
     found = []
-    for task in ordered_tasks(decays["task"]):
-        caption = (f"{task_title(task)}: mean relabel rate μ_ε over training against β1, one line per β2 of the runs "
-                   "(solid: exact mean over K epochs, eq. 10; dotted: continuous approximation, eq. 11). The grey "
-                   f"band is the best fixed ε of HER, {MU_EPS_BAND[0]} to {MU_EPS_BAND[1]}. Each marker is one decay "
-                   "configuration (diamonds: success-driven rates, at the median over complete seeds of each seed's "
-                   "mean logged rate), coloured "
-                   "by its final median test success (see the summary table).")
-        found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: μ_ε against β1 (Fig. 12)", caption,
-                                  partial(_draw_mean_rate, task, summary[summary["task"] == task], beta2_colours)))
+    for task in ordered_tasks(seeds["task"]):
+        caption = (f"{task_title(task)}: each configuration's outcome against its mean relabel rate μ_ε = (1/K) Σ ε(k): "
+                   "eq. 10 exactly for schedules of the epoch (squares: constant rates, HER at 0.8; circles: "
+                   "decays), the realised mean of the logged rates for adaptive ones (diamonds: each seed at its "
+                   "own, the marker at their median, the horizontal bar their range). Left: the mean raw test "
+                   "success over the K epochs (higher is better); right: the first epoch the "
+                   f"{analysis.window}-epoch moving average reaches 0.5 (lower is better; a seed that never does "
+                   "is drawn at K + 1, above the dotted line at K). Small dots: the seeds; large markers: the median "
+                   "over seeds, the vertical bar their range. Configurations at the same μ_ε are drawn side by "
+                   f"side. Grey band: the paper's best fixed ε of HER, μ_ε in [{MU_EPS_BAND[0]}, {MU_EPS_BAND[1]}]. "
+                   "Complete runs only.")
+        found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: outcome against μ_ε (Fig. 12)", caption,
+                                  partial(_draw_mean_rate, task, seeds[seeds["task"] == task],
+                                          arms[arms["task"] == task], styles)))
     return found
 
 
-def _eq9(rows: pd.DataFrame) -> pd.Series:
-    """Rows (columns adaptive, beta2) of eq. 9's decays: a function of the epoch with a beta2 (the others in the beta1
-    plane adapt to the run: success-driven rates)."""
-    return ~rows["adaptive"].astype(bool) & rows["beta2"].notna()
+def _dodged(arms: pd.DataFrame, span: float) -> pd.Series:
+    """x of each arm (rows of ``arms``, column mu_eps): its mu_eps, moved sideways by DODGE x ``span`` steps when
+    other arms share it, the group centred on it."""
+    shared = arms.groupby(arms["mu_eps"].round(9))["mu_eps"]
+    rank, count = shared.cumcount(), shared.transform("size")
+    return arms["mu_eps"] + (rank - (count - 1) / 2) * DODGE * span
 
 
-def _mean_rate_panels(summary: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
-    """One panel per (reward weights, MEP) of the decay configurations in ``summary`` (one task's
-    summary rows joined with their configs' settings): [(title, its decay rows)]; the title names
-    the weights, K and the final success of the constant baselines with the same weights."""
-    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]
-    panels = []
-    for lambda_r, lambda_h, mep in dict.fromkeys(zip(decays["lambda_r"], decays["lambda_h"], decays["mep"])):
-        same = _has_weights(summary, (lambda_r, lambda_h)) & (summary["mep"] == mep)
-        group = summary[same & ~summary["constant_rate"] & summary["beta1"].notna()]
-        baselines = summary[same & summary["constant_rate"]]
-        reference = ", ".join(f"{row.config} {row.final_median:.2f}" for row in baselines.itertuples())
-        title = (_weights_text(lambda_r, lambda_h) + (", with MEP" if mep else "")
-                 + f" (K={int(group['total_epochs'].mode().iloc[0])})"
-                 + (f"; final success of {reference}" if reference else ""))
-        panels.append((_fitting(title, PANEL_SIZE[0], 9), group))
-    return panels
-
-
-def _draw_mean_rate(task: str, summary: pd.DataFrame, beta2_colours: dict[float, tuple]) -> Figure:
-    panels = _mean_rate_panels(summary)
-    legend_width = LEGEND_WIDTH + 1.0  # the legend, then the colour bar
-    figure, axes = _panels(len(panels), f"{task_title(task)}: mean relabel rate μ_ε of the decay schedules",
-                           legend_width=legend_width, title_lines=max(_lines(title) for title, _ in panels))
-    norm = Normalize(0.0, 1.0)
-    for axis, (title, group) in zip(axes, panels):
-        _mean_rate_panel(axis, group, beta2_colours, norm)
-        _set_title(axis, title, fontsize=9)
-    _label_outer(axes, "μ_ε (mean relabel rate\nover the K epochs)", xlabel="β1")
-    axes[0].plot([], [], color="black", linewidth=1.4, label="eq. 10: exact mean")
-    axes[0].plot([], [], color="black", linewidth=1.0, linestyle=":", label="eq. 11: 1 − β1/(1 + e^β2)")
-    decays = summary[~summary["constant_rate"] & summary["beta1"].notna()]
-    fixed = _eq9(decays)
-    for marker, kinds, label in (("o", fixed, "decay schedule (eq. 10 μ_ε)"),
-                                 ("D", ~fixed, "success-driven rate (median over seeds of μ_ε)")):
-        if kinds.any():  # the marker kinds; their colours are the colour bar's
-            axes[0].scatter([], [], marker=marker, s=50, facecolors="white", edgecolors="black",
-                            label=_legend_label(label))
+def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: dict[str, dict]) -> Figure:
+    legend_width = _legend_width([*arms["config"].astype(str), "the paper's best fixed ε"])
+    figure, axes = _panels(len(MEAN_RATE_PANELS), f"{task_title(task)}: outcome against the mean relabel rate μ_ε",
+                           legend_width=legend_width, sharey=False)
+    low = min(MU_EPS_BAND[0], arms["mu_low"].min())
+    high = max(MU_EPS_BAND[1], arms["mu_high"].max())
+    span = max(high - low, 0.05)
+    x = _dodged(arms, span)
+    offsets = dict(zip(arms["config"], x - arms["mu_eps"]))
+    for axis, (outcome, title, ylabel) in zip(axes, MEAN_RATE_PANELS):
+        axis.axvspan(*MU_EPS_BAND, color="0.88", zorder=0, linewidth=0, label="the paper's best fixed ε")
+        for arm, position in zip(arms.to_dict("records"), x):
+            own = seeds[seeds["config"] == arm["config"]]
+            colour = styles[arm["config"]]["color"]
+            axis.scatter(own["mu_eps"] + offsets[arm["config"]], own[outcome], s=12, color=colour, alpha=0.5,
+                         linewidths=0, zorder=2)
+            median = arm[outcome]
+            spread = [[arm["mu_eps"] - arm["mu_low"]], [arm["mu_high"] - arm["mu_eps"]]]
+            axis.errorbar([position], [median], yerr=[[median - arm[f"{outcome}_low"]], [arm[f"{outcome}_high"] - median]],
+                          xerr=spread if arm["kind"] == "adaptive" else None, marker=MEAN_RATE_MARKERS[arm["kind"]],
+                          markersize=7, color=colour, markeredgecolor="black", markeredgewidth=0.6, capsize=3,
+                          linestyle="none", zorder=3, label=_legend_label(arm["config"]))
+        axis.set_xlim(low - 0.1 * span, high + 0.1 * span)
+        _set_title(axis, _fitting(title, PANEL_SIZE[0], PANEL_TITLE_SIZE))
+        axis.set_ylabel(ylabel)
+        axis.set_xlabel("μ_ε (mean relabel rate over the K epochs)")
+    if seeds["never"].any():
+        axes[1].axhline(seeds["total_epochs"].max(), color="0.4", linewidth=0.8, linestyle=":")
+    axes[0].set_ylim(-0.02, 1.02)
     _figure_legend(figure, axes, legend_width)
-    width, _ = figure.get_size_inches()
-    bottom, top = axes[-1].get_position().y0, axes[0].get_position().y1
-    colour_axis = figure.add_axes(((width - 1.0) / width, bottom, 0.15 / width, top - bottom))
-    figure.colorbar(ScalarMappable(norm=norm, cmap=colormaps["viridis"]), cax=colour_axis,
-                    label="final median test success")
     return figure
-
-
-def _mean_rate_panel(axis, group: pd.DataFrame, beta2_colours: dict[float, tuple], norm: Normalize) -> None:
-    """The optimal band, the eq. 10/11 lines of each beta2 of ``group``'s fixed decays, and one
-    marker per configuration of ``group`` at (beta1, mu_eps)."""
-    total_epochs = int(group["total_epochs"].mode().iloc[0])
-    axis.axhspan(*MU_EPS_BAND, color="0.85", zorder=0, label=f"best fixed ε of HER, {MU_EPS_BAND[0]}-{MU_EPS_BAND[1]}")
-    fixed = _eq9(group)
-    for beta2, line in metrics.mean_rate_lines(list(group.loc[fixed, "beta2"]), total_epochs).groupby("beta2"):
-        axis.plot(line["beta1"], line["exact"], color=beta2_colours[beta2], linewidth=1.4, label=f"β2 = {beta2:g}")
-        axis.plot(line["beta1"], line["approx"], color=beta2_colours[beta2], linewidth=1.0, linestyle=":")
-    for marker, points in (("o", group[fixed]), ("D", group[~fixed])):
-        axis.scatter(points["beta1"], points["mu_eps"], c=points["final_median"], cmap=colormaps["viridis"],
-                     norm=norm, marker=marker, s=70, edgecolors="black", linewidths=0.8, zorder=3)
-    axis.set_xlim(-0.02, 1.02)
-    axis.set_ylim(0.0, 1.02)
 
 
 FIGURE_BUILDERS: list[Callable[[Analysis], list[ReportFigure]]] = [

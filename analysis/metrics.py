@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.load import HER_EPS, HER_WEIGHTS
-from hersd.schedules import decay_rate, mean_rate_approx, schedule_from_record, schedule_rank
+from hersd.schedules import schedule_from_record, schedule_rank
 from hersd.envs.tasks import task_rank
 
 GROUP = ["task", "config"]
@@ -40,12 +40,12 @@ SHARE_COLUMNS = ("share_real_success", "share_real_failure", "share_hindsight")
 PAPER_COMPOSITION_TASK = "push"
 PAPER_COMPOSITION_EPOCH = 150
 PAPER_COMPOSITION = {"share_real_success": 0.053, "share_hindsight": 0.80, "share_real_failure": 0.147}
-SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "final_median", "auc",
+SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "mu_eps", "final_median", "auc",
                    *(f"epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS),
                    *(f"raw_epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
                    f"p_improve_{BASELINE}"]
 
-RUN_AUC = "auc"  # besides RUN_OUTCOME_COLUMNS in run_outcomes: a run's mean raw test success over its epochs
+RUN_AUC = "raw_auc"  # besides RUN_OUTCOME_COLUMNS in run_outcomes: a run's mean raw test success over its epochs
 RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix in ("", "raw_")
                                   for threshold in SUCCESS_THRESHOLDS)]
 
@@ -54,6 +54,11 @@ RUN_OUTCOME_COLUMNS = ["final", *(f"{prefix}epochs_to_{threshold:g}" for prefix 
 PERMUTATION_RESAMPLES = 9999
 STATISTIC_DECIMALS = 10  # the permutation tests' mean differences: see _mean_difference
 PERMUTATION_BATCH = 64  # splits evaluated at once: bounds memory for a large grid (~ batch x pairs x seeds floats)
+# The decay against the constant rate at the same mean rate (equal_mu_tests): mu_eps equal within this tolerance.
+EQUAL_MU_TOLERANCE = 1e-9
+EQUAL_MU_OUTCOMES = [*RUN_OUTCOME_COLUMNS, RUN_AUC]
+EQUAL_MU_COLUMNS = ["task", "config", "versus", "mu_eps", "seeds", "versus_seeds", "outcome", "config_mean",
+                    "versus_mean", "p_config_better", "p_versus_better", "splits", "smallest_p"]
 PERMUTATION_COLUMNS = ["task", "config", "versus", "seeds", "versus_seeds",
                        *(f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS)]
 
@@ -268,7 +273,7 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
 
     ``curves``: :func:`smoothed_curves` of the complete runs; ``runs``: the run table (every run).
     Columns: task, config, seeds (complete runs), in_progress (its runs left out, not
-    complete), final_median (median over seeds of final success), auc (mean over epochs 1..K
+    complete), mu_eps (the mean rate: the run table's, the median over seeds for an adaptive schedule), final_median (median over seeds of final success), auc (mean over epochs 1..K
     of the median curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve
     reaches it, NaN if never), raw_epochs_to_0.5 / raw_epochs_to_0.9 (the same for the median
     of the raw, unsmoothed success), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap
@@ -281,12 +286,14 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
         finals[key] = group["final"].to_numpy()
         grids[key] = common_grid(group["final_grid"])
     in_progress = (~runs["complete"]).groupby([runs["task"], runs["config"]], observed=True).sum()
+    mean_rates = runs[runs["complete"]].groupby(GROUP, observed=True)["mu_eps"].median()
     rows = []
     for (task, config), median in median_curves(curves).groupby(GROUP, observed=True, sort=True):
         final = finals[(task, config)]
         low, high = iqm_interval([final], seed=seed)
         row = {
             "task": task, "config": config, "seeds": len(final), "in_progress": int(in_progress[(task, config)]),
+            "mu_eps": float(mean_rates[(task, config)]),
             "final_median": grid_median(final, grids[(task, config)]),
             "auc": grid_mean(median["median"].to_numpy(), median["median_grid"].to_numpy()),
         }
@@ -333,16 +340,16 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
                                                     f"p_improve_{BASELINE}"])
 
 
-def _outcomes_higher_is_better(runs: pd.DataFrame, outcomes: pd.DataFrame) -> dict[tuple[str, str], tuple]:
-    """(task, config) -> ((learner, K), its complete seeds' RUN_OUTCOME_COLUMNS of shape (5, n_seeds)), each
-    signed so that higher is better: final as is, epochs to a threshold negated, ``never`` counted as
-    K + 1 epochs. Only configurations with at least two complete seeds (a configuration's label names
-    its learner and K, so all its runs share them)."""
+def _outcomes_higher_is_better(runs: pd.DataFrame, outcomes: pd.DataFrame,
+                               columns: list[str] = RUN_OUTCOME_COLUMNS) -> dict[tuple[str, str], tuple]:
+    """(task, config) -> ((learner, K), its complete seeds' ``columns`` of ``outcomes``, shape (len(columns),
+    n_seeds)), each signed so that higher is better: success (final, auc) as is, epochs to a threshold negated,
+    ``never`` counted as K + 1 epochs. Only configurations with at least two complete seeds (a configuration's
+    label names its learner and K, so all its runs share them)."""
     complete = runs.loc[runs["complete"], [*GROUP, "run", "learner", "total_epochs"]].merge(outcomes, on="run")
     never = complete["total_epochs"].astype(float) + 1.0
-    values = np.column_stack([complete["final"].to_numpy(float),
-                              *(-complete[column].astype(float).fillna(never).to_numpy()
-                                for column in RUN_OUTCOME_COLUMNS[1:])])  # (n_runs, 5)
+    values = np.column_stack([-complete[column].astype(float).fillna(never).to_numpy() if "epochs_to_" in column
+                              else complete[column].to_numpy(float) for column in columns])  # (n_runs, columns)
     grouped = complete.groupby(GROUP, observed=True)
     setups = grouped[["learner", "total_epochs"]].first()
     return {key: (tuple(setups.loc[key]), values[rows].T) for key, rows in grouped.indices.items() if len(rows) >= 2}
@@ -384,9 +391,76 @@ def permutation_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, seed: int = BO
             rows.append({"task": task, "config": config, "versus": versus, "seeds": seeds,
                          "versus_seeds": versus_seeds, **dict(zip(p_columns, p_values.tolist()))})
     table = pd.DataFrame.from_records(rows, columns=PERMUTATION_COLUMNS)
-    order = {config: rank for rank, config in enumerate(runs["config"].cat.categories)}
-    ranks = {"task": task_rank, "config": order.get, "versus": order.get}
+    ranks = {"task": task_rank, "config": _config_rank(runs), "versus": _config_rank(runs)}
     return table.sort_values(list(ranks), key=lambda column: column.map(ranks[column.name])).reset_index(drop=True)
+
+
+def equal_mu_pairs(runs: pd.DataFrame) -> pd.DataFrame:
+    """Every pair of configurations of a task at the same mean rate: one a schedule that is neither constant nor
+    adaptive, the other a constant rate (the control), with the same learner, K, reward weights and MEP, both
+    with at least two complete seeds, their mu_eps within EQUAL_MU_TOLERANCE. Columns task, config, versus
+    (the constant), mu_eps (the decay's); in configuration order."""
+    setup = ["task", "learner", "total_epochs", "lambda_r", "lambda_h", "mep"]
+    complete = runs[runs["complete"]]
+    configs = complete.groupby(GROUP, observed=True).agg(
+        **{name: (name, "first") for name in [*setup[1:], "constant_rate", "adaptive", "mu_eps"]},
+        seeds=("run", "size")).reset_index()
+    configs = configs[(configs["seeds"] >= 2) & ~configs["adaptive"].astype(bool)]
+    constant = configs["constant_rate"].astype(bool)
+    pairs = configs[~constant].merge(configs[constant], on=setup, suffixes=("", "_versus"))
+    pairs = pairs[(pairs["mu_eps"] - pairs["mu_eps_versus"]).abs() < EQUAL_MU_TOLERANCE]
+    pairs = pairs.rename(columns={"config_versus": "versus"})[["task", "config", "versus", "mu_eps"]]
+    ranks = {"task": task_rank, "config": _config_rank(runs), "versus": _config_rank(runs)}
+    return pairs.sort_values(list(ranks), key=lambda column: column.map(ranks[column.name])).reset_index(drop=True)
+
+
+def _config_rank(runs: pd.DataFrame):
+    """config label -> its rank in the configurations' order (the run table's categories)."""
+    order = {config: rank for rank, config in enumerate(runs["config"].cat.categories)}
+    return order.get
+
+
+def _outcome_grids(curves: pd.DataFrame) -> pd.DataFrame:
+    """Per run (index): the denominator of each EQUAL_MU_OUTCOMES value (epochs: 1; NaN: no grid)."""
+    by_run = curves.groupby("run", sort=True)
+    grids = pd.DataFrame({"final": by_run["smoothed_grid"].last(), RUN_AUC: by_run["success_grid"].first() * by_run.size()})
+    return grids.assign(**{column: 1.0 for column in RUN_OUTCOME_COLUMNS[1:]})
+
+
+def equal_mu_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, curves: pd.DataFrame,
+                   seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+    """Decay against constant rate at the same mu_eps (:func:`equal_mu_pairs`): one row per pair and outcome
+    (EQUAL_MU_OUTCOMES). Columns EQUAL_MU_COLUMNS: config_mean / versus_mean, each side's mean over its complete
+    seeds (exact; ``never`` counted as K + 1 epochs); p_config_better / p_versus_better, the two one-sided
+    permutation-test p-values (as :func:`permutation_tests`: difference of the means, exact up to
+    PERMUTATION_RESAMPLES splits); splits, C(seeds + versus_seeds, seeds); smallest_p, the smallest p either can
+    be: 1 / splits when exact, else 1 / (PERMUTATION_RESAMPLES + 1).
+    """
+    from scipy import stats
+
+    pairs = equal_mu_pairs(runs)
+    signed = _outcomes_higher_is_better(runs, outcomes, EQUAL_MU_OUTCOMES)
+    grids = _outcome_grids(curves).loc[:, EQUAL_MU_OUTCOMES]
+    runs_of = runs[runs["complete"]].groupby(GROUP, observed=True)["run"].apply(list)
+    sign = np.array([-1.0 if "epochs_to_" in outcome else 1.0 for outcome in EQUAL_MU_OUTCOMES])
+    rows = []
+    for pair in pairs.itertuples(index=False):
+        x, y = signed[(pair.task, pair.config)][1], signed[(pair.task, pair.versus)][1]
+        p_values = [stats.permutation_test((x, y), _mean_difference, permutation_type="independent", vectorized=True,
+                                           alternative=alternative, n_resamples=PERMUTATION_RESAMPLES, axis=-1,
+                                           rng=np.random.default_rng(seed)).pvalue for alternative in ("greater", "less")]
+        splits = math.comb(x.shape[1] + y.shape[1], x.shape[1])
+        smallest = 1 / splits if splits <= PERMUTATION_RESAMPLES else 1 / (PERMUTATION_RESAMPLES + 1)
+        means = [on_grid((sign[:, None] * values).mean(axis=1),
+                         values.shape[1] * grids.loc[runs_of[(pair.task, config)]].agg(common_grid).to_numpy())
+                 for config, values in ((pair.config, x), (pair.versus, y))]
+        for index, outcome in enumerate(EQUAL_MU_OUTCOMES):
+            rows.append({"task": pair.task, "config": pair.config, "versus": pair.versus, "mu_eps": pair.mu_eps,
+                         "seeds": x.shape[1], "versus_seeds": y.shape[1], "outcome": outcome,
+                         "config_mean": means[0][index], "versus_mean": means[1][index],
+                         "p_config_better": p_values[0][index], "p_versus_better": p_values[1][index],
+                         "splits": splits, "smallest_p": smallest})
+    return pd.DataFrame.from_records(rows, columns=EQUAL_MU_COLUMNS)
 
 
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:
@@ -453,18 +527,30 @@ def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
 
 
-def mean_rate_lines(beta2_values: list[float], total_epochs: int, points: int = 101) -> pd.DataFrame:
-    """mu_eps over beta1 in [0, 1] for each beta2: eq. 10 (``exact``, with K = total_epochs)
-    and eq. 11 (``approx``). Columns beta2, beta1, exact, approx; ``points`` rows per beta2."""
-    beta1 = np.linspace(0.0, 1.0, points)
-    k = np.arange(1, total_epochs + 1)
-    # eq. 10 is linear in beta1: 1 - beta1 * mean_k (k/K)^exp(beta2) = 1 - beta1 * (1 - eps(k) at beta1 = 1).
-    frames = [pd.DataFrame({"beta2": beta2, "beta1": beta1,
-                            "exact": 1.0 - beta1 * float(np.mean(1.0 - decay_rate(k, total_epochs, 1.0, beta2))),
-                            "approx": mean_rate_approx(beta1, beta2)})
-              for beta2 in sorted(set(beta2_values))]
-    columns = ["beta2", "beta1", "exact", "approx"]
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
+def mean_rate_outcomes(runs: pd.DataFrame, outcomes: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Fig. 12's data: each complete seed's outcome and mean rate, and each configuration's summary of them.
+
+    ``runs``: the run table; ``outcomes``: :func:`run_outcomes`. Returns (seeds, arms). seeds: one row per
+    complete run, columns task, config, seed, kind (``constant``, ``fixed`` or ``adaptive``: its schedule),
+    total_epochs, mu_eps (the run table's: eq. 10 exact, the realised mean for an adaptive schedule),
+    raw_auc, epochs_to_0.5 (``never`` as K + 1), never (bool). arms: one row per (task, config), columns task,
+    config, kind, seeds, mu_eps / mu_low / mu_high (median, min, max over seeds), and for raw_auc and
+    epochs_to_0.5 the median, ``<outcome>_low`` and ``<outcome>_high`` (min, max) over seeds; configuration order.
+    """
+    complete = runs.loc[runs["complete"], [*GROUP, "run", "seed", "constant_rate", "adaptive", "total_epochs",
+                                           "mu_eps"]]
+    seeds = complete.merge(outcomes[["run", RUN_AUC, "epochs_to_0.5"]], on="run")
+    kinds = np.where(seeds["constant_rate"].astype(bool), "constant",
+                     np.where(seeds["adaptive"].astype(bool), "adaptive", "fixed"))
+    reached = seeds["epochs_to_0.5"].astype(float)
+    seeds = seeds.assign(kind=kinds, never=reached.isna(), **{"epochs_to_0.5": reached.fillna(seeds["total_epochs"] + 1.0)})
+    seeds = seeds[[*GROUP, "seed", "kind", "total_epochs", "mu_eps", RUN_AUC, "epochs_to_0.5", "never"]]
+    grouped = seeds.groupby(GROUP, observed=True, sort=True)
+    arms = grouped.agg(kind=("kind", "first"), seeds=("seed", "size"), mu_eps=("mu_eps", "median"),
+                       mu_low=("mu_eps", "min"), mu_high=("mu_eps", "max"),
+                       **{f"{outcome}{suffix}": (outcome, statistic) for outcome in (RUN_AUC, "epochs_to_0.5")
+                          for suffix, statistic in (("", "median"), ("_low", "min"), ("_high", "max"))})
+    return seeds.reset_index(drop=True), arms.reset_index()
 
 
 @dataclass
@@ -477,7 +563,7 @@ class Analysis:
     :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
     :func:`composition_versus_paper`; window: the smoothing window in epochs; outcomes:
     :func:`run_outcomes` of every run (each run's own numbers, the run list's); tests:
-    :func:`permutation_tests` between the configurations of each task.
+    :func:`permutation_tests` between the configurations of each task; equal_mu_tests: :func:`equal_mu_tests`.
     """
 
     runs: pd.DataFrame
@@ -492,6 +578,7 @@ class Analysis:
     window: int
     outcomes: pd.DataFrame
     tests: pd.DataFrame
+    equal_mu_tests: pd.DataFrame
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
@@ -505,4 +592,5 @@ def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = B
                     aggregate=aggregate_table(complete_curves, runs, seed=seed), shares=shares,
                     q_means=mean_q(complete_epochs),
                     composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window,
-                    outcomes=outcomes, tests=permutation_tests(runs, outcomes, seed=seed))
+                    outcomes=outcomes, tests=permutation_tests(runs, outcomes, seed=seed),
+                    equal_mu_tests=equal_mu_tests(runs, outcomes, curves, seed=seed))

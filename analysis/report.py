@@ -9,6 +9,7 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/aggregate.csv|.md     per configuration across tasks
     tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
     tables/permutation_tests.csv|.md  per task, one-sided permutation tests between configurations' seeds
+    tables/equal_mu_tests.csv|.md  per task, each decay against the constant rate at its mu_eps, both directions
     tables/runs.csv              the runs behind them
     tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates
     search/<study>_*             each Optuna study's beta-plane figure and best trials
@@ -98,6 +99,14 @@ TABLE_NOTES = {
               "threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
               "two sides' seeds (5 against 5: 252, so the smallest p is 1/252), or 9999 seeded random splits "
               "when there are more. Each line is one test; reading many at once, expect some small p by chance."),
+    "equal_mu": ("Each schedule that decays against the constant rate at the same mean rate μ_ε (same task, learner, "
+                 "K, reward weights and MEP; paired automatically): does the decay help, or only relabelling more? One "
+                 "row per outcome of each seed (final success, epochs to 0.5 / 0.9 smoothed and raw, a seed that "
+                 "never reaches one counted as K + 1, and the mean raw test success over the K epochs): each side's "
+                 "mean over seeds, and the one-sided permutation-test p-values in both directions (difference of the "
+                 "means, exact when the splits number at most 9999). <b>Smallest p the seeds allow</b>: 1 over the "
+                 "<b>splits of the seeds</b>, C(n1 + n2, n1) (1/252 at 5 against 5; 1/10000 beyond 9999 splits, drawn "
+                 "at random): no result can be more significant."),
     "critic_tests": ("The critic's bias (Q minus the discounted return the policy obtains, figure above) of each "
                      "complete run, averaged over epochs 1-50 (trapezoids over its evaluated epochs), for real and "
                      "for hindsight goals: the configuration's and the versus configuration's means over runs, "
@@ -239,7 +248,8 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
               html_table(_titled(analysis.summary), epochs=_common_epochs(analysis.summary, runs)),
               "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
-              html_table(analysis.aggregate), *_tests_html(analysis.tests), "<h2>Figures</h2>"]
+              html_table(analysis.aggregate), *_tests_html(analysis.tests), *_equal_mu_html(analysis.equal_mu_tests),
+              "<h2>Figures</h2>"]
     placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
         parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
@@ -274,6 +284,14 @@ def _tests_html(tests: pd.DataFrame) -> list[str]:
         return parts + [html_table(_titled(tests))]
     return parts + [f"<p>{len(tests)} tests: too many for this page; they are in tables/permutation_tests.md "
                     "and .csv.</p>"]
+
+
+def _equal_mu_html(tests: pd.DataFrame) -> list[str]:
+    """The decay against the constant rate at its mu_eps (analysis.metrics.equal_mu_tests); nothing without a pair."""
+    if tests.empty:
+        return []
+    return ["<h2>Decay or mean rate: each decay against the constant rate at its μ_ε</h2>",
+            f"<p>{TABLE_NOTES['equal_mu']}</p>", html_table(_titled(tests))]
 
 
 def _run_list(analysis: Analysis) -> pd.DataFrame:
@@ -431,6 +449,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
     if not analysis.tests.empty:
         tables["permutation_tests"] = analysis.tests
+    if not analysis.equal_mu_tests.empty:
+        tables["equal_mu_tests"] = analysis.equal_mu_tests
     if not (critic_tests := bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))).empty:
         tables["critic_bias_tests"] = critic_tests
     if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:

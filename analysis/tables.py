@@ -16,6 +16,7 @@ import pandas as pd
 
 FLOAT_FORMAT = "{:.3f}"
 EPOCHS, SHARE, PROBABILITY, BIAS = "{:.0f}", "{:.3f}", "{:.3f}", "{:.2f}"
+MEAN_RATE, SMALL_P, MIXED = "{:.4f}", "{:.2g}", "{:.4g}"  # mu_eps; p-values down to 1/3003; epochs and success
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ COLUMNS: dict[str, Column] = {
     "seeds": Column("complete seeds"),
     "versus_seeds": Column("versus: complete seeds"),
     "in_progress": Column("runs in progress (left out)"),
+    "mu_eps": Column("μ_ε: mean relabel rate over the epochs (eq. 10)", MEAN_RATE),
     "final_median": Column("test success at epoch {K}, median over seeds", SHARE),
     "auc": Column("area under the median curve (0 to 1)", SHARE),
     "epochs_to_0.5": _reach("0.5", "median, smoothed"),
@@ -55,6 +57,14 @@ COLUMNS: dict[str, Column] = {
     "p_epochs_to_0.9": Column("p: fewer epochs to 0.9 (smoothed)", PROBABILITY),
     "p_raw_epochs_to_0.5": Column("p: fewer epochs to 0.5 (raw)", PROBABILITY),
     "p_raw_epochs_to_0.9": Column("p: fewer epochs to 0.9 (raw)", PROBABILITY),
+    # the decay against the constant rate at the same mu_eps (analysis.metrics.equal_mu_tests)
+    "outcome": Column("outcome (per seed)"),
+    "config_mean": Column("configuration: mean over seeds", MIXED),
+    "versus_mean": Column("versus: mean over seeds", MIXED),
+    "p_config_better": Column("p: the configuration does better", SMALL_P),
+    "p_versus_better": Column("p: the versus configuration does better", SMALL_P),
+    "splits": Column("splits of the seeds"),
+    "smallest_p": Column("smallest p the seeds allow", SMALL_P),
     "epoch": Column("epoch", EPOCHS),
     "share_real_success": Column("real successful (share of minibatch)", SHARE),
     "share_hindsight": Column("hindsight (share of minibatch)", SHARE),
@@ -69,6 +79,7 @@ COLUMNS: dict[str, Column] = {
     "seed": Column("seed"),
     "state": Column("state"),
     "final": Column("test success at its last epoch (smoothed)", SHARE),
+    "raw_auc": Column("mean raw test success over its epochs", SHARE),
     "seconds_per_epoch": Column("seconds per epoch (median)", "{:.1f}"),
     "cpu": Column("CPU"),
     # a study's best trials (analysis.search_figures): numbers at the table's 4 significant digits
@@ -79,7 +90,6 @@ COLUMNS: dict[str, Column] = {
     "beta2": Column("β2"),
     "eps": Column("ε"),
     "lambda_h": Column("λh"),
-    "mu_eps": Column("μ_ε over the epochs (eq. 10)"),
     "mu_eps_approx": Column("μ_ε by eq. 11"),
     "in_band": Column("μ_ε in HER's best band"),
     "retry_of": Column("retry of trial"),

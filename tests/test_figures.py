@@ -57,37 +57,47 @@ def test_no_figure_without_its_data(hand_sized):
     assert q_figures(her_only) == []  # nothing to compare HER with
 
 
-@pytest.mark.parametrize("with_success", [False, True])
-def test_the_mean_rate_figure_names_the_marker_kinds_it_draws(tmp_path, with_success):
-    curve = np.linspace(0.0, 1.0, 6)
-    write_run(tmp_path / "her", make_config(), curve)
-    write_run(tmp_path / "linear", make_config(schedule=ScheduleConfig("linear", beta1=0.5)), curve)
-    if with_success:
-        write_run(tmp_path / "success", make_config(schedule=ScheduleConfig(kind="success", beta1=0.5)), curve)
-    table = load_runs(tmp_path)
-    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
-    labels = [text.get_text().replace("\n", " ") for text in figure.legends[0].get_texts()]
-    markers = [label for label in labels if label.startswith(("decay schedule", "success-driven"))]
-    assert markers == ["decay schedule (eq. 10 μ_ε)"] + (
-        ["success-driven rate (median over seeds of μ_ε)"] if with_success else [])
-    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
-    assert [len(collection.get_offsets()) for collection in drawn] == [1] * (1 + with_success)  # circles, diamonds
+def _arm_markers(axis) -> dict[str, tuple]:
+    """config -> ((x, y) of its median marker, its vertical bar's (low, high), its horizontal bar or None)."""
+    arms = {}
+    for container in axis.containers:  # one ErrorbarContainer per configuration
+        line, _, bars = container.lines
+        ((x, y),) = line.get_xydata()
+        vertical = bars[-1].get_segments()[0][:, 1]
+        horizontal = bars[0].get_segments()[0][:, 0] if container.has_xerr else None
+        arms[container.get_label()] = ((x, y), tuple(sorted(vertical)), horizontal)
+    return arms
 
 
-def test_the_success_driven_rate_sits_at_the_median_of_its_complete_seeds_mean_rates(tmp_path):
-    """Each seed of a success-driven rate logs its own rates; the diamond sits at the median over
-    the complete seeds of each seed's mean rate, an unfinished seed left out."""
-    success = ScheduleConfig(kind="success", beta1=0.5, window=1)
-    curves = {0: [0.0] * 6, 1: [0.0, 0.2, 0.4, 0.6, 0.8, 1.0], 2: [1.0] * 6}
-    for seed, curve in curves.items():
-        write_run(tmp_path / f"success{seed}", make_config(schedule=success, seed=seed), np.array(curve))
-    write_run(tmp_path / "success3", make_config(schedule=success, seed=3), np.ones(3), complete=False)
-    table = load_runs(tmp_path)
-    rates = table.runs.set_index("seed")["mu_eps"]
-    assert rates[0] > rates[1] > rates[2] and rates[3] < rates[1]  # the seeds' rates differ
-    figure = mean_rate_figures(metrics.analyse(table.runs, table.epochs, WINDOW))[0].draw()
-    drawn = [collection for collection in figure.axes[0].collections if len(collection.get_offsets())]
-    assert [tuple(point) for point in drawn[0].get_offsets()] == [(0.5, pytest.approx(rates[1]))]
+def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_range_of_its_seeds(tmp_path):
+    """HER (mu_eps 0.8), linear b1=0.5 (eq. 10 over K = 6: 17/24) and the constant 17/24, side by side, and a
+    success-driven rate at the median of its complete seeds' realised mean rates (an unfinished seed left out)."""
+    arms = {"her": ScheduleConfig(), "linear": ScheduleConfig("linear", beta1=0.5),
+            "control": ScheduleConfig(eps=17 / 24), "success": ScheduleConfig(kind="success", beta1=0.5, window=1)}
+    curves = [[0.0] * 6, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0], [1.0] * 6]  # raw AUC 0, 0.5, 1; reach 0.5: never, 5, 1
+    for name, schedule in arms.items():
+        for seed, curve in enumerate(curves):
+            write_run(tmp_path / f"{name}{seed}", make_config(schedule=schedule, seed=seed), np.array(curve))
+    write_run(tmp_path / "success3", make_config(schedule=arms["success"], seed=3), np.ones(3), complete=False)
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    (report_figure,) = mean_rate_figures(analysis)
+    assert report_figure.name == "mean_rate_push"
+    figure = report_figure.draw()
+    auc_axis, epochs_axis = figure.axes
+    rates = analysis.runs[analysis.runs["complete"] & (analysis.runs["schedule"] == "success")]["mu_eps"]
+    auc, epochs = _arm_markers(auc_axis), _arm_markers(epochs_axis)
+    assert auc["HER"] == ((0.8, 0.5), (0.0, 1.0), None)
+    assert epochs["HER"][0] == (0.8, 5) and epochs["HER"][1] == (1, 7)  # a seed that never reaches 0.5: K + 1
+    (success_x, success_y), _, success_spread = auc["success b1=0.5"]
+    assert success_x == pytest.approx(rates.median()) and success_spread == pytest.approx([rates.min(), rates.max()])
+    linear_x, control_x = auc["linear b1=0.5"][0][0], auc["HER eps=0.708333"][0][0]
+    assert control_x < linear_x and (linear_x + control_x) / 2 == pytest.approx(17 / 24)  # side by side
+    seeds = [collection for collection in auc_axis.collections if len(collection.get_offsets()) == 3]
+    assert len(seeds) == 4  # each configuration's three complete seeds
+    band = [patch for patch in auc_axis.patches if patch.get_label() == "the paper's best fixed ε"]
+    assert len(band) == 1 and band[0].get_path().get_extents(band[0].get_patch_transform()).x0 == pytest.approx(0.8)
+    labels = [text.get_text() for text in figure.legends[0].get_texts()]
+    assert labels == ["the paper's best fixed ε", "HER eps=0.708333", "HER", "linear b1=0.5", "success b1=0.5"]
 
 
 def test_fig4_draws_the_median_of_50_epoch_averages_and_the_range_over_seeds(push_analysis):
@@ -124,7 +134,7 @@ def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
             write_run(tmp_path / f"{threshold}-{schedule.kind}", config, np.linspace(0, 1, 6))
     analysis = metrics.analyse(*_tables(tmp_path), window=WINDOW)
     assert "linear b1=0.25 (task.distance_threshold=0.07)" in set(analysis.runs["config"])
-    for report_figure in learning_curve_figures(analysis) + composition_figures(analysis):
+    for report_figure in learning_curve_figures(analysis) + composition_figures(analysis) + mean_rate_figures(analysis):
         figure = report_figure.draw()
         canvas = FigureCanvasAgg(figure)  # what savefig draws on
         canvas.draw()

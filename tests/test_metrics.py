@@ -162,12 +162,6 @@ def test_aggregate_pools_tasks(analysed):
     assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)
 
 
-def test_mean_rate_lines_use_eq10_and_eq11():
-    lines = metrics.mean_rate_lines([0.0], total_epochs=4, points=3)  # beta1 = 0, 0.5, 1
-    assert lines["exact"].tolist() == pytest.approx([1.0, 1 - 0.5 * (1 + 2 + 3 + 4) / 16, 1 - 10 / 16])
-    assert lines["approx"].tolist() == pytest.approx([1.0, 0.75, 0.5])
-
-
 def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
     """A folder holding HER at K = 6 and K = 8 (labels "HER (epochs=6)", "HER (epochs=8)") and TD3
     runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""
@@ -190,6 +184,36 @@ def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_
     assert p_improve["TD3 linear b1=0.5"] == 0.0  # TD3's HER (1.0), not DDPG's
     assert p_improve["HER (epochs=8)"] == 0.5 and p_improve["TD3 HER"] == 0.5
     assert analysis.aggregate.set_index("config")["p_improve_HER"]["linear b1=0.5"] == 1.0
+
+
+def test_each_decay_is_tested_in_both_directions_against_the_constant_rate_at_its_mean_rate(tmp_path):
+    """linear b1=0.5 over K = 6 relabels at mu_eps = 1 - 0.5 * 3.5 / 6 = 17/24 on average: it is paired with the
+    constant rate 17/24 (by value, not by name), not with HER (0.8), an exponential decay or the success-driven
+    rate. Three flat seeds (0.9, 0.8, 0.7) against two (0.6, 0.5): of the C(5, 3) = 10 splits only the observed
+    one puts the three best on the decay's side."""
+    linear, control = ScheduleConfig("linear", beta1=0.5), ScheduleConfig(eps=1 - 0.5 * 3.5 / 6)
+    others = [ScheduleConfig(), ScheduleConfig("exponential", beta1=0.5, beta2=0.5), ScheduleConfig("success", beta1=0.5)]
+    for seed, level in enumerate([0.9, 0.8, 0.7]):
+        write_run(tmp_path / f"linear{seed}", make_config(schedule=linear, seed=seed), np.full(6, level))
+        for index, schedule in enumerate(others):
+            write_run(tmp_path / f"other{index}-{seed}", make_config(schedule=schedule, seed=seed), np.full(6, level))
+    for seed, level in enumerate([0.6, 0.5]):
+        write_run(tmp_path / f"control{seed}", make_config(schedule=control, seed=seed), np.full(6, level))
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    assert analysis.summary.set_index("config")["mu_eps"].to_dict() == pytest.approx({
+        "HER": 0.8, "HER eps=0.708333": 17 / 24, "linear b1=0.5": 17 / 24,
+        "exp b1=0.5 b2=0.5": analysis.runs.loc[analysis.runs["schedule"] == "exponential", "mu_eps"].iloc[0],
+        "success b1=0.5": analysis.runs.loc[analysis.runs["schedule"] == "success", "mu_eps"].median()})
+    tests = analysis.equal_mu_tests.set_index("outcome")
+    assert set(tests["config"]) == {"linear b1=0.5"} and set(tests["versus"]) == {"HER eps=0.708333"}
+    assert list(tests.index) == ["final", "epochs_to_0.5", "epochs_to_0.9", "raw_epochs_to_0.5", "raw_epochs_to_0.9",
+                                 "raw_auc"]
+    assert tests.loc["final", ["config_mean", "versus_mean"]].tolist() == [0.8, 0.55]  # float sums: 0.8000000000000002
+    for outcome in ("final", "raw_auc"):
+        assert tests.loc[outcome, ["p_config_better", "p_versus_better"]].tolist() == pytest.approx([1 / 10, 1.0])
+    assert tests.loc["epochs_to_0.5", ["config_mean", "p_config_better", "p_versus_better"]].tolist() == [1, 1, 1]
+    assert tests.loc["epochs_to_0.9", ["config_mean", "versus_mean"]].tolist() == [5, 7]  # 1, never, never: K + 1
+    assert (tests["splits"] == 10).all() and tests["smallest_p"].tolist() == pytest.approx([1 / 10] * 6)
 
 
 def test_push_summary_equals_hand_values(push_analysis):

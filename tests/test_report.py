@@ -77,6 +77,26 @@ def test_the_report_page_shows_a_short_list_of_permutation_tests(tmp_path):
     assert tests.splitlines()[2].startswith("| push | HER | linear b1=0.5 | 2 | 2 |")
 
 
+def test_the_decay_against_the_constant_at_its_mean_rate_is_a_table_file_and_a_page_section(tmp_path):
+    """linear b1=0.5 over K = 6 and the constant 17/24 (its mu_eps), two seeds each: equal_mu_tests.csv holds a row
+    per outcome, summary.csv their mu_eps, the page the section; the Fig. 12 file keeps its name."""
+    from hersd.config import ScheduleConfig
+
+    for seed in (0, 1):
+        write_run(tmp_path / "logs" / f"linear{seed}", make_config(schedule=ScheduleConfig("linear", beta1=0.5),
+                                                                    seed=seed), np.full(6, 0.9))
+        write_run(tmp_path / "logs" / f"control{seed}", make_config(schedule=ScheduleConfig(eps=17 / 24), seed=seed),
+                  np.full(6, 0.5))
+    assert report_main([str(tmp_path / "logs"), "--out", str(tmp_path / "report")]) == 0
+    tests = pd.read_csv(tmp_path / "report" / "tables" / "equal_mu_tests.csv")
+    assert len(tests) == 6 and set(tests["config"]) == {"linear b1=0.5"} and set(tests["splits"]) == {6}
+    summary = pd.read_csv(tmp_path / "report" / "tables" / "summary.csv")
+    assert summary["mu_eps"].tolist() == pytest.approx([17 / 24] * 2)
+    page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
+    assert "<h2>Decay or mean rate: each decay against the constant rate at its μ_ε</h2>" in page
+    assert (tmp_path / "report" / "figures" / "mean_rate_push.png").exists()
+
+
 def test_report_filters_and_svg(sweep, tmp_path):
     out = tmp_path / "svg"
     assert report_main([str(sweep), "--out", str(out), "--task", "slide", "--algo", "her", "--format", "svg"]) == 0
