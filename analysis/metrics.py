@@ -150,16 +150,17 @@ def smoothed_curves(epochs: pd.DataFrame, window: int) -> pd.DataFrame:
 def median_curves(curves: pd.DataFrame) -> pd.DataFrame:
     """Per (task, config, epoch): median, low (min), high (max) of ``smoothed`` over seeds, n_seeds,
     raw_median (the median of the raw, unsmoothed success) and median_grid (the denominator of median:
-    2 smoothed_grid), medians exact (:func:`grid_median`)."""
+    2 smoothed_grid), medians exact (:func:`on_grid`)."""
     grouped = curves.groupby([*GROUP, "epoch"], observed=True)
-    summary = grouped["smoothed"].agg(median="median", low="min", high="max", n_seeds="count")
-    summary["raw_median"] = grouped["success"].median()
-    grids = grouped[["success_grid", "smoothed_grid"]].agg(["min", "max"])
-    for column in ("success_grid", "smoothed_grid"):  # seeds averaging different epochs: no common grid
-        grids[(column, "min")] = grids[(column, "min")].where(grids[(column, "min")] == grids[(column, "max")])
-    summary["median_grid"] = 2 * grids[("smoothed_grid", "min")]
+    summary = grouped.agg(median=("smoothed", "median"), low=("smoothed", "min"), high=("smoothed", "max"),
+                          n_seeds=("smoothed", "count"), raw_median=("success", "median"),
+                          grid_low=("smoothed_grid", "min"), grid_high=("smoothed_grid", "max"))
+    # seeds averaging different numbers of epochs at one epoch have no common grid: NaN, rounded instead
+    summary["median_grid"] = 2 * summary["grid_low"].where(summary["grid_low"] == summary["grid_high"])
     summary["median"] = on_grid(summary["median"].to_numpy(), summary["median_grid"].to_numpy())
-    summary["raw_median"] = on_grid(summary["raw_median"].to_numpy(), 2 * grids[("success_grid", "min")].to_numpy())
+    success_grid = curves["success_grid"].iloc[0] if len(curves) else float("nan")  # one for the whole table
+    summary["raw_median"] = on_grid(summary["raw_median"].to_numpy(), 2 * success_grid)
+    summary = summary.drop(columns=["grid_low", "grid_high"])
     return summary.reset_index()
 
 
