@@ -20,11 +20,12 @@ from typing import Any, List, Optional
 from omegaconf import DictConfig, OmegaConf
 
 from hersd.errors import ConfigError
-from hersd.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config
+from hersd.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
 from hersd.envs.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
+PRECISIONS = ("fp32", "bf16")
 
 
 def learner_names() -> list[str]:
@@ -275,6 +276,9 @@ class TrainConfig:
     # Thread counts can change floating-point sums: logged, not part of the run's identity.
     threads: str = "auto"
     device: str = "auto"  # where networks and updates run: auto (cuda if available, else cpu) | cpu | cuda[:N]
+    # The updates' matrix products: fp32 | bf16 (hidden layers in bfloat16, all else float32; docs/LEARNERS.md,
+    # "Precision"; a CPU without bf16 instructions refuses it). Part of the run's identity (fp32 adds nothing).
+    precision: str = "fp32"
     # Treat denormal floats (|x| < 1.2e-38) as zero in the run's torch work (updates, acting, bias evaluation,
     # animations; every intra-op thread; the physics stays IEEE), as the reference's TensorFlow does for its
     # kernels (hersd/denormals.py). Adam's moments of units whose gradient died decay through the denormal
@@ -293,9 +297,10 @@ class TrainConfig:
         _check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (
             self.device.startswith("cuda:") and self.device[5:].isdigit())),
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+        _check(self.precision in PRECISIONS, f"precision must be fp32 or bf16, got {self.precision!r}")
         self.task.resolve()
         if isinstance(self.schedule, Schedule):
-            self.schedule.resolve(self.epochs)
+            self.schedule = settle(self.schedule, self.epochs)
         else:
             self.schedule = schedule_from_config(self.schedule, self.epochs)
 

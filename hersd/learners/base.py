@@ -23,15 +23,17 @@ TD3, SAC), the polyak move of the targets, ``policy_value`` and the checkpoint o
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from functools import reduce
+from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, NamedTuple, Optional
 
 import numpy as np
 import torch
 from torch import nn
 
-from hersd.config import DDPGConfig, TrainConfig
+from hersd.config import ConfigError, DDPGConfig, TrainConfig
 from hersd.replay.buffer import TransitionBatch
 
 if TYPE_CHECKING:
@@ -39,6 +41,7 @@ if TYPE_CHECKING:
 
 LEARNERS: dict[str, type["GoalConditionedLearner"]] = {}  # learner= name -> class, filled as classes are defined
 TWIN_CRITICS = ("critic", "critic2")  # TD3's and SAC's critics: the target takes their minimum
+BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")  # /proc/cpuinfo flags of bf16 instructions (x86; Arm's bf16)
 
 
 def learner_class(name: str) -> type["GoalConditionedLearner"]:
@@ -80,13 +83,41 @@ class RunningNormalizer:
             self.update(np.zeros((0, self.total.shape[0])))
 
 
-def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> nn.Sequential:
+class FullPrecisionLinear(nn.Linear):
+    """A linear layer that runs in float32 under autocast (precision=bf16's output layers): (B, in) -> (B, out)."""
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        with torch.autocast(inputs.device.type, enabled=False):
+            return super().forward(inputs.float())
+
+
+def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int,
+        output_layer: type[nn.Linear] = nn.Linear) -> nn.Sequential:
+    """ReLU MLP; ``output_layer`` the class of its last layer (same parameters and initialisation)."""
     layers: list[nn.Module] = []
     for _ in range(hidden_layers):  # in-place ReLU: Linear's backward does not need its output
         layers += [nn.Linear(in_dim, hidden_units), nn.ReLU(inplace=True)]
         in_dim = hidden_units
-    layers.append(nn.Linear(in_dim, out_dim))
+    layers.append(output_layer(in_dim, out_dim))
     return nn.Sequential(*layers)
+
+
+def cpu_has_bf16() -> bool:
+    """Whether this CPU lists bf16 instructions in /proc/cpuinfo (False where there is none)."""
+    cpuinfo = Path("/proc/cpuinfo")
+    if not cpuinfo.exists():
+        return False
+    flags = {flag for line in cpuinfo.read_text().splitlines()
+             if line.startswith(("flags", "Features")) for flag in line.split(":", 1)[1].split()}
+    return any(flag in flags for flag in BF16_CPU_FLAGS)
+
+
+def check_precision(precision: str, device: torch.device) -> None:
+    """ConfigError for precision=bf16 on a CPU without bf16 instructions: emulated, it is slower than
+    fp32, and running fp32 instead would file fp32 results under a bf16 run's identity."""
+    if precision == "bf16" and device.type == "cpu" and not cpu_has_bf16():
+        raise ConfigError("precision=bf16: this CPU has no bf16 instructions (avx512_bf16, amx_bf16); "
+                          "use precision=fp32")
 
 
 def mlp_parameters(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> int:
@@ -165,14 +196,24 @@ class GoalConditionedLearner:
                  for name, shape in cls.networks(spec).items()}
         return 4 * (4 * sum(sizes.values()) + sum(sizes[name] for name in cls.TARGETS))
 
-    def __init__(self, cfg: DDPGConfig, spec: "EnvSpec", gamma: float, device: torch.device):
+    def __init__(self, cfg: DDPGConfig, spec: "EnvSpec", gamma: float, device: torch.device, precision: str = "fp32"):
+        check_precision(precision, device)
         self.cfg, self.max_action, self.gamma, self.device = cfg, spec.max_action, gamma, device
+        self.precision = precision
         self.obs_norm = RunningNormalizer(spec.obs_dim, cfg.norm_eps, cfg.clip_norm, device)
         self.goal_norm = RunningNormalizer(spec.goal_dim, cfg.norm_eps, cfg.clip_norm, device)
+        output_layer = nn.Linear if precision == "fp32" else FullPrecisionLinear
         for name, (inputs, outputs) in self.networks(spec).items():
-            setattr(self, name, mlp(inputs, outputs, cfg.hidden_layers, cfg.hidden_units).to(device))
+            setattr(self, name, mlp(inputs, outputs, cfg.hidden_layers, cfg.hidden_units, output_layer).to(device))
         for name in self.TARGETS:
             setattr(self, f"{name}_target", copy.deepcopy(getattr(self, name)).requires_grad_(False))
+
+    def matmul_context(self) -> contextlib.AbstractContextManager:
+        """Where an update's forward passes run: as they are (fp32), or under bf16 autocast (bf16: hidden
+        layers in bfloat16; output layers, losses, targets and normalisers stay float32)."""
+        if self.precision == "fp32":
+            return contextlib.nullcontext()
+        return torch.autocast(self.device.type, dtype=torch.bfloat16)
 
     def tensor(self, array: np.ndarray) -> torch.Tensor:
         """A host numpy array as a tensor on the agent's device (no copy on the CPU)."""

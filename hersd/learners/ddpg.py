@@ -53,11 +53,11 @@ class DDPG(GoalConditionedLearner):
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
               device: torch.device) -> "DDPG":
-        return cls(cfg.ddpg, spec, gamma, q_range, device)
+        return cls(cfg.ddpg, spec, gamma, q_range, device, cfg.precision)
 
     def __init__(self, cfg: DDPGConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
-                 device: torch.device = torch.device("cpu")):
-        super().__init__(cfg, spec, gamma, device)
+                 device: torch.device = torch.device("cpu"), precision: str = "fp32"):
+        super().__init__(cfg, spec, gamma, device, precision)
         self.target_range = q_range  # (q_min, q_max); q_max = 0 for rewards <= 0 (Fetch, Hand)
         # One Adam over actor and critics (one parameter group each): a single fused step per update.
         self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
@@ -98,17 +98,18 @@ class DDPG(GoalConditionedLearner):
 
         As in the reference code, both losses are computed with the current networks and
         the one optimiser then steps: the actor's loss sees the critic through detached
-        parameters, so only the critic loss moves the critics.
+        parameters, so only the critic loss moves the critics. The passes run in ``matmul_context``.
         """
-        inputs = self._inputs(batch.obs, batch.goal)
-        action = self.tensor(batch.action) / self.max_action
-        target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
-        loss, q = self.critic_loss(torch.cat([inputs, action], dim=1), target_q)
-        critic_loss = loss.item()
-        if self.actor_step_due():
-            actor_loss = self.actor_loss(inputs)
-            self.last_actor_loss = actor_loss.item()
-            loss = loss + actor_loss
+        with self.matmul_context():
+            inputs = self._inputs(batch.obs, batch.goal)
+            action = self.tensor(batch.action) / self.max_action
+            target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
+            loss, q = self.critic_loss(torch.cat([inputs, action], dim=1), target_q)
+            critic_loss = loss.item()
+            if self.actor_step_due():
+                actor_loss = self.actor_loss(inputs)
+                self.last_actor_loss = actor_loss.item()
+                loss = loss + actor_loss
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()

@@ -50,7 +50,7 @@ class SAC(GoalConditionedLearner):
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
               device: torch.device) -> "SAC":
-        return cls(cfg.ddpg, cfg.learner.sac, spec, gamma, device)  # q_range: not SAC's bound (target_q)
+        return cls(cfg.ddpg, cfg.learner.sac, spec, gamma, device, cfg.precision)  # q_range: not SAC's bound (target_q)
 
     @classmethod
     def networks(cls, spec: "EnvSpec") -> dict[str, tuple[int, int]]:
@@ -59,8 +59,8 @@ class SAC(GoalConditionedLearner):
         return {**super().networks(spec), "actor": (in_dim, 2 * spec.action_dim)}
 
     def __init__(self, cfg: DDPGConfig, sac: SACConfig, spec: "EnvSpec", gamma: float,
-                 device: torch.device = torch.device("cpu")):
-        super().__init__(cfg, spec, gamma, device)
+                 device: torch.device = torch.device("cpu"), precision: str = "fp32"):
+        super().__init__(cfg, spec, gamma, device, precision)
         self.optimizer = torch.optim.Adam([{"params": self.actor.parameters(), "lr": cfg.actor_lr},
                                            {"params": [*self.critic.parameters(), *self.critic2.parameters()],
                                             "lr": cfg.critic_lr}], fused=True)
@@ -117,16 +117,18 @@ class SAC(GoalConditionedLearner):
         return reward + self.gamma * (next_q - self.log_alpha.exp() * next_log_prob)
 
     def update(self, batch: TransitionBatch) -> UpdateStats:
-        """One step of both critics, the actor (through frozen critics) and the temperature."""
-        inputs = self._inputs(batch.obs, batch.goal)
-        action = self.tensor(batch.action) / self.max_action
-        target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
-        critic_loss, q = self.critic_loss(torch.cat([inputs, action], dim=1), target_q)
-        policy_action, log_prob = self.sample(inputs)
-        policy_inputs = torch.cat([inputs, policy_action], dim=1)
-        policy_q = torch.minimum(frozen_q(self.critic, policy_inputs), frozen_q(self.critic2, policy_inputs))
-        alpha = self.log_alpha.exp().detach()
-        actor_loss = torch.mean(alpha * log_prob - policy_q)
+        """One step of both critics, the actor (through frozen critics) and the temperature; the passes
+        run in ``matmul_context``."""
+        with self.matmul_context():
+            inputs = self._inputs(batch.obs, batch.goal)
+            action = self.tensor(batch.action) / self.max_action
+            target_q = self.target_q(self._inputs(batch.next_obs, batch.goal), self.tensor(batch.reward).unsqueeze(1))
+            critic_loss, q = self.critic_loss(torch.cat([inputs, action], dim=1), target_q)
+            policy_action, log_prob = self.sample(inputs)
+            policy_inputs = torch.cat([inputs, policy_action], dim=1)
+            policy_q = torch.minimum(frozen_q(self.critic, policy_inputs), frozen_q(self.critic2, policy_inputs))
+            alpha = self.log_alpha.exp().detach()
+            actor_loss = torch.mean(alpha * log_prob - policy_q)
         self.optimizer.zero_grad(set_to_none=True)
         (critic_loss + actor_loss).backward()
         self.optimizer.step()

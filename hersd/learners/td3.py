@@ -40,11 +40,11 @@ class TD3(DDPG):
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
               device: torch.device) -> "TD3":
-        return cls(cfg.ddpg, cfg.learner.td3, spec, gamma, q_range, device)
+        return cls(cfg.ddpg, cfg.learner.td3, spec, gamma, q_range, device, cfg.precision)
 
     def __init__(self, cfg: DDPGConfig, td3: TD3Config, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
-                 device: torch.device = torch.device("cpu")):
-        super().__init__(cfg, spec, gamma, q_range, device)
+                 device: torch.device = torch.device("cpu"), precision: str = "fp32"):
+        super().__init__(cfg, spec, gamma, q_range, device, precision)
         self.td3 = td3
         self.update_count = 0  # updates taken; the actor steps when update_count % policy_delay == 0 before it
 
