@@ -402,6 +402,14 @@ def _draw(figures: list[ReportFigure], folders: list[Path], fmt: str) -> tuple[l
     return paths, ForkedMap(_render, [(figure, path, fmt) for figure, path in zip(figures, paths)]).results()
 
 
+def _analysis_tables(analysis: Analysis) -> dict[str, pd.DataFrame]:
+    """The tables of the statistics by file stem: summary, aggregate, and those the data allows (not empty)."""
+    tables = {"summary": analysis.summary, "aggregate": analysis.aggregate,
+              f"composition_{PAPER_COMPOSITION_EPOCH}": analysis.composition_vs_paper,
+              "permutation_tests": analysis.tests, "equal_mu_tests": analysis.equal_mu_tests}
+    return {name: table for name, table in tables.items() if name in ("summary", "aggregate") or not table.empty}
+
+
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
                  algos: Sequence[str] | None = None, window: int = DEFAULT_WINDOW, fmt: str = "png",
                  storages: Sequence[str] = (), log: Callable[[str], None] = print,
@@ -447,13 +455,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 
     start = time.perf_counter()
-    tables = {"summary": analysis.summary, "aggregate": analysis.aggregate}
-    if not analysis.composition_vs_paper.empty:
-        tables[f"composition_{PAPER_COMPOSITION_EPOCH}"] = analysis.composition_vs_paper
-    if not analysis.tests.empty:
-        tables["permutation_tests"] = analysis.tests
-    if not analysis.equal_mu_tests.empty:
-        tables["equal_mu_tests"] = analysis.equal_mu_tests
+    tables = _analysis_tables(analysis)
     if not (critic_tests := bias_tests(integrated_bias(table.epochs[table.epochs["complete"]]))).empty:
         tables["critic_bias_tests"] = critic_tests
     if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
