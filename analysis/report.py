@@ -68,9 +68,7 @@ TABLE_NOTES = {
     "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
                 "other table: <b>complete seeds</b> counts them, <b>runs in progress</b> the runs left out (not "
                 "complete: running or stopped; they are drawn on their own in the learning curves). "
-                "<b>μ_ε</b>: the mean relabel rate over the K epochs, eq. 10 exactly (for a success-driven rate the "
-                "median over seeds of each seed's mean logged rate). Medians and means of success are exact (each "
-                "rate is a fraction of the test episodes). "
+                "Medians and means of success are exact (each rate is a fraction of the test episodes). "
                 "<b>Test success at epoch K</b>: median over seeds of each seed's test success at its last epoch "
                 "K, smoothed (the moving average of the first line). "
                 "<b>Area under the median curve</b>: mean over epochs 1..K of the median smoothed curve "
@@ -249,7 +247,8 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     if not claims.empty:
         parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(claims)]
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
-              html_table(_titled(analysis.summary), epochs=_common_epochs(analysis.summary, runs)),
+              html_table(_titled(analysis.summary.drop(columns="mu_eps")),  # wider than the page: in Fig. 12
+                         epochs=_common_epochs(analysis.summary, runs)),
               "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
               html_table(analysis.aggregate), *_tests_html(analysis.tests), *_equal_mu_html(analysis.equal_mu_tests),
               "<h2>Figures</h2>"]

@@ -41,7 +41,7 @@ COLUMNS: dict[str, Column] = {
     "seeds": Column("complete seeds"),
     "versus_seeds": Column("versus: complete seeds"),
     "in_progress": Column("runs in progress (left out)"),
-    "mu_eps": Column("μ_ε: mean relabel rate over the epochs (eq. 10)", MEAN_RATE),
+    "mu_eps": Column("μ_ε over the epochs (eq. 10)", MEAN_RATE),
     "final_median": Column("test success at epoch {K}, median over seeds", SHARE),
     "auc": Column("area under the median curve (0 to 1)", SHARE),
     "epochs_to_0.5": _reach("0.5", "median, smoothed"),
