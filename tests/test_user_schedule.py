@@ -70,7 +70,7 @@ def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(t
     assert (results / "reach" / "her" / "step-0.9_0.3").is_dir() and (results / "reach" / "her" / "step-0.9_0.6").is_dir()
 
     searched = command("sweeps.search.cli:main", [*TINY, "epochs=2", f"results_dir={results}", "search.n_trials=2",
-                                                  "search.space.kinds=[user_steps.Step]", "search.enqueue=[]"], tmp_path)
+                                                  "search.space.kinds=[user_steps.Step]"], tmp_path)
     assert "trials: 2 complete" in searched.stdout
     assert len([path for path in (results / "reach" / "her").iterdir() if path.name.startswith("step-")]) == 5
 
@@ -95,3 +95,63 @@ def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
     schedule = TrainConfig(schedule={"kind": "step", "low": 0.4}, epochs=4).schedule
     assert list(schedule.epoch_rates(4)) == [0.9, 0.9, 0.4, 0.4]
     assert schedule.record() == {"kind": "step", "high": 0.9, "low": 0.4}
+
+
+# The schedule's contract with a newcomer's own classes (tests/user_schedules.py), each in a fresh interpreter.
+
+def test_a_rate_outside_0_1_is_refused_in_one_line_before_any_work(tmp_path):
+    from user_schedules import MODULE, command, write_module
+
+    refused = command("hersd.cli:main", [*TINY, f"results_dir={tmp_path / 'results'}", f"schedule._target_={MODULE}.Over"],
+                      write_module(tmp_path), code=2)
+    assert refused.stderr == ("hersd-train: error: schedule over high=1.4 low=0.5 k0=1: its rate at epoch 1 of 200 is "
+                              f"1.4, not in [0, 1]; fix {MODULE}.Over.rate\n")
+    assert not (tmp_path / "results").exists()
+
+
+def test_an_adaptive_rate_outside_0_1_stops_its_run_at_that_epoch_keeping_the_finished_ones(tmp_path):
+    from user_schedules import MODULE, command, write_module
+
+    results = tmp_path / "results"
+    stopped = command("hersd.cli:main", [*TINY, "epochs=3", "quiet=true", "threads=1", f"results_dir={results}",
+                                         f"schedule._target_={MODULE}.LateOver"], write_module(tmp_path), code=2)
+    assert stopped.stderr.count("\n") == 1 and "its rate at epoch 2 of 3 is 1.4, not in [0, 1]" in stopped.stderr
+    (log,) = results.glob("reach/her/lateover/seed0-*/run.mcap")
+    assert list(read_run(log).epochs["relabel_rate"]) == [0.9]
+
+
+def test_tag_and_label_default_to_the_class_name_and_its_settings(tmp_path, monkeypatch):
+    from user_schedules import MODULE, write_module
+
+    from hersd.config import TrainConfig
+    from hersd.runstore import run_dir
+
+    monkeypatch.syspath_prepend(str(write_module(tmp_path)))
+    cfg = TrainConfig(schedule={"_target_": f"{MODULE}.KStep", "low": 0.4, "k0": 3.0}, epochs=4)
+    assert (cfg.schedule.tag(), cfg.schedule.label()) == ("kstep-high_0.9-low_0.4-k0_3", "kstep high=0.9 low=0.4 k0=3")
+    assert cfg.schedule.record()["k0"] == 3 and isinstance(cfg.schedule.record()["k0"], int)  # 3.0 is 3: one run
+    assert run_dir(cfg).parent.name == "kstep-high_0.9-low_0.4-k0_3"
+
+
+def test_train_help_lists_the_settings_of_the_class_the_command_names(tmp_path):
+    from user_schedules import MODULE, command, write_module
+
+    shown = command("hersd.cli:main", [f"schedule._target_={MODULE}.KStep", "--help"], write_module(tmp_path)).stdout
+    listed = shown[shown.index(f"  {MODULE}.KStep: eps(k) = high for k <= k0, low after"):]
+    assert "schedule.k0=1" in listed and "the last epoch at the high rate" in listed
+
+
+def test_the_smoke_grid_plans_a_users_schedule_beside_her(tmp_path):
+    """The documented way (docs/ARCHITECTURE.md, "Add a schedule"): a preset of one's own in a config folder
+    added to Hydra's search path, then swept beside the package's presets."""
+    from user_schedules import MODULE, command, write_module
+
+    (tmp_path / "my_conf" / "schedule").mkdir(parents=True)
+    (tmp_path / "my_conf" / "schedule" / "kstep.yaml").write_text(f"_target_: {MODULE}.KStep\nk0: 2\n")
+    planned = command("sweeps.launch:main", ["+grid=smoke", "schedule=constant,kstep", f"results_dir={tmp_path}",
+                                             f"hydra.searchpath=[file://{tmp_path / 'my_conf'}]", "--dry-run"],
+                      write_module(tmp_path)).stdout
+    assert "sweep: 4 runs" in planned, planned
+    for tag in ("constant-0.8", "kstep-high_0.9-low_0.5-k0_2"):
+        assert sorted(line.split()[1].rsplit("/", 1)[1][:5] for line in planned.splitlines()
+                      if f"/{tag}/" in line) == ["seed0", "seed1"], planned

@@ -61,6 +61,8 @@ class Schedule:
         for item in self.params():
             if "low" in item.metadata:
                 check_param(item, getattr(self, item.name))
+                if item.metadata["integer"] and isinstance(getattr(self, item.name), float):  # 5.0 is 5, one identity
+                    setattr(self, item.name, int(getattr(self, item.name)))
 
     @classmethod
     def params(cls) -> list[dataclasses.Field]:
@@ -141,10 +143,18 @@ def shown_value(value: Any) -> str:
 
 
 def check_rates(schedule: Schedule, total_epochs: int) -> None:
-    """ScheduleRateError (one line) unless a fixed schedule's rate of every epoch 1..total_epochs is in [0, 1]."""
-    if not schedule.adaptive:
-        for k in range(1, total_epochs + 1):
+    """ScheduleRateError (one line) unless a fixed schedule's rate of every epoch 1..total_epochs is in [0, 1]
+    (or if computing one raises)."""
+    if schedule.adaptive:
+        return
+    for k in range(1, total_epochs + 1):
+        try:
             schedule.checked_rate(k, total_epochs)
+        except ScheduleRateError:
+            raise
+        except Exception as err:  # noqa: BLE001 - a user's rate: one line naming it, before any work
+            raise ScheduleRateError(f"schedule {kind_name(type(schedule))}: its rate at epoch {k} of {total_epochs} "
+                                    f"raised {type(err).__name__}: {' '.join(str(err).split())}") from None
 
 
 def check_param(item: dataclasses.Field, value: Any) -> None:

@@ -3,8 +3,9 @@ and training configs, open the study, re-enqueue lost trials, run or submit the 
 print the outcome with the ``hersd-report`` command that draws the study (the search never
 imports the analysis: data flows search -> storage -> report).
 
-Exit codes: 0 done (or jobs submitted), 1 a worker process died, 2 bad input (one line on
-stderr, before any work) or a run the training layer refused, 130 interrupted.
+Exit codes: 0 done (or jobs submitted), 1 a worker process died or every trial of the command failed
+(the first error named), 2 bad input (one line on stderr, before any work) or a run the training layer
+refused, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from hersd.study import report_command, shown, storage_file
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
-from sweeps.search.study import count_finished, open_study, requeue_lost_trials, trial_counts
+from sweeps.search.study import count_finished, first_error, open_study, requeue_lost_trials, trial_counts
 from sweeps.search.workers import check_slurm, run_local, split_trials, submit_slurm
 
 USAGE = """usage: hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OVERRIDES ...]
 
-Optuna search of the relabel-rate schedule (beta1, beta2; optionally lambda_h and the kind).
+Optuna search of the relabel-rate schedule: (beta1, beta2) by default; any kind's searched settings,
+a class of your own's too (search.space.kinds=[my_pkg.steps.Step]); optionally lambda_h.
 Each trial trains one run per seed through the run store; re-running the same command
 resumes the study. search.* settings: SearchConfig in sweeps/search/config.py, conf/search/*.yaml;
 every other override goes to the training config as for hersd-train (task=reach epochs=50 ...).
@@ -34,6 +36,7 @@ every other override goes to the training config as for hersd-train (task=reach 
   search=default|wide|ci        search.n_trials=50  search.n_jobs=2  search.seeds=3
   search.objective=auc|final    search.pruner.kind=median|hyperband|none
   search.space.beta2.low=-1     search.storage=journal:/shared/hersd/study.log
+  search.space.ranges.k0={low: 1, high: 50}   (any searched setting's range)
   search.launcher=slurm         search.slurm.partition=<name>
 
 The study's figures and tables: hersd-report <results_dir> (printed at the end of each search).
@@ -88,29 +91,30 @@ def launch(plan: SearchPlan, storage: BaseStorage, study: optuna.Study) -> list[
               f"{plan.search.n_trials}); nothing to run", flush=True)
         return []
     shares = split_trials(remaining, plan.search.n_jobs)
-    trials_before = len(study.get_trials(deepcopy=False))
     print(f"{finished} of {plan.search.n_trials} trials finished; running {remaining} on "
           f"{len(shares)} {plan.search.launcher} worker(s)", flush=True)
     if plan.search.launcher == "slurm":
-        job_ids = submit_slurm(plan, shares, trials_before)
+        job_ids = submit_slurm(plan, shares)
         print(f"submitted SLURM jobs {', '.join(job_ids)}; logs in {plan.study_dir}/slurm. Once they end, draw "
               f"the study with: {report_command(plan.base.results_dir, plan.storage)} (re-run this command to "
               f"resume a search cut short)")
         return None
-    return run_local(plan, shares, trials_before)
+    return run_local(plan, shares)
 
 
-def summarise(plan: SearchPlan, storage: BaseStorage) -> None:
-    """Print the trial counts, the best trial, and the commands that show the study."""
+def summarise(plan: SearchPlan, storage: BaseStorage, first_trial: int) -> str | None:
+    """Print the trial counts, the best trial, and the commands that show the study -> the first error if every
+    trial from number ``first_trial`` on (this command's) failed."""
     study = optuna.load_study(study_name=plan.study_name, storage=storage)
     counts = trial_counts(study)
-    print(f"trials: {', '.join(f'{n} {state}' for state, n in counts.items())}")
+    print(f"trials: {', '.join(f'{n} {state}' for state, n in counts.items() if n or state != 'skipped')}")
     if counts["complete"]:
         best = study.best_trial
         print(f"best: trial {best.number}, value {best.value:.4f}, params {best.params}")
     print(f"figures and tables: {report_command(plan.base.results_dir, plan.storage)}")
     target = shown(plan.storage) if "://" in plan.storage else str(storage_file(plan.storage))  # URL or journal
     print(f"dashboard: pip install optuna-dashboard; optuna-dashboard {shlex.quote(target)}")
+    return first_error(study, first_trial)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -122,6 +126,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         plan, storage, study = start(argv)
         print(f"study {plan.study_name} in {shown(plan.storage)}", flush=True)
+        first_trial = len(study.get_trials(deepcopy=False))
         worker_codes = launch(plan, storage, study)
     except ConfigError as err:
         _fail(str(err))
@@ -130,10 +135,12 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(130)
     if worker_codes is None:  # SLURM jobs submitted
         return
-    summarise(plan, storage)
+    error = summarise(plan, storage, first_trial)
     failed = [code for code in worker_codes if code != 0]
     if 2 in failed:
         _fail("a worker stopped because a run was refused (the line above); fix the input and re-run")
+    if error is not None:
+        _fail(f"every trial of this search failed; the first, {error}", code=1)
     if failed:
         _fail(f"{len(failed)} worker(s) exited abnormally (codes {failed}); re-run the same command to resume",
               code=1)

@@ -25,6 +25,7 @@ LAUNCHERS = ("local", "slurm")
 METRICS = tuple(name for name, (kind, _) in EPOCH_FIELDS.items()
                 if kind == "number" and name not in OPTIONAL_EPOCH_FIELDS)
 MAX_SLURM_JOBS = 10_000  # worker jobs of one search (SLURM's array limit is usually lower: sbatch says so)
+RANGES_KEY = "search.space.ranges"
 STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,199}")  # it names files: <study>.db, <study>/
 
 
@@ -47,7 +48,8 @@ class SpaceConfig:
     beta2: Bounds = field(default_factory=lambda: Bounds(-2.0, 2.0))  # eq. 9 shape (exponential kind only)
     eps: Bounds = field(default_factory=lambda: Bounds(0.5, 1.0))  # fixed rate (constant kind only)
     lambda_h: Optional[Bounds] = None  # hindsight reward weight (eq. 8); null keeps the algo's
-    # other kinds' searched parameters by name (e.g. cosine's start, end); default: the range the schedule declares
+    # any searched setting's range by name (e.g. cosine's start, a class's k0), over beta1, beta2, eps above;
+    # default: the range the schedule declares. Command line: search.space.ranges.k0={low: 1, high: 50}
     ranges: Dict[str, Bounds] = field(default_factory=dict)
 
 
@@ -120,14 +122,25 @@ def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
 
 
 def space_bounds(space: SpaceConfig, kind: str, name: str) -> Bounds:
-    """The range a search draws parameter ``name`` of ``kind`` from: search.space.<name> (beta1, beta2, eps),
-    search.space.ranges.<name>, else the range the schedule class declares."""
-    if name in ("beta1", "beta2", "eps"):
-        return getattr(space, name)
+    """The range a search draws parameter ``name`` of ``kind`` from: search.space.ranges.<name>,
+    search.space.<name> (beta1, beta2, eps), else the range the schedule class declares."""
     if name in space.ranges:
         return space.ranges[name]
+    if name in ("beta1", "beta2", "eps"):
+        return getattr(space, name)
     meta = next(item.metadata for item in schedule_class(kind).params() if item.name == name)
     return Bounds(meta["low"], meta["high"])
+
+
+def whole_number(kind: str, name: str) -> bool:
+    """Whether ``kind`` declares setting ``name`` a whole number (drawn with Optuna's suggest_int)."""
+    return any(item.name == name and item.metadata.get("integer", False) for item in schedule_class(kind).params())
+
+
+def space_record(space: SpaceConfig) -> dict[str, Any]:
+    """What a search draws, as the study's identity holds it: the kinds and each searched range [low, high, log]."""
+    return {"kinds": list(space.kinds),
+            **{name: [bounds.low, bounds.high, bounds.log] for name, bounds in sorted(searched_bounds(space).items())}}
 
 
 def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
@@ -156,10 +169,16 @@ def check_space(space: SpaceConfig) -> None:
             raise ConfigError(f"search.space.kinds: {err}") from None
         _check(fits, f"search.space.kinds: {kind} cannot be searched (it declares no searched parameters or adapts "
                      f"to the run); searchable kinds: {', '.join(k for k in known_kinds() if searchable(k))}")
+    drawn = {name for kind in kinds for name in kind_params(kind)}
+    for name in space.ranges:
+        _check(name in drawn, f"search.space.ranges.{name}: no searched kind draws {name}; they draw "
+                              f"{', '.join(sorted(drawn))}")
     for name, bounds in searched_bounds(space).items():
-        where = f"search.space.{name}"
+        where = f"search.space.{'ranges.' if name in space.ranges else ''}{name}"
         _check(_is_number(bounds.low) and _is_number(bounds.high),
-               f"{where}: bounds must be finite numbers, got [{bounds.low}, {bounds.high}]")
+               f"{where}: bounds must be finite numbers, got [{bounds.low}, {bounds.high}]; set "
+               f"search.space.ranges.{name}={{low: ..., high: ...}}")
+        _check(isinstance(bounds.log, bool), f"{where}.log must be true or false, got {bounds.log!r}")
         _check(bounds.low <= bounds.high, f"{where}: low ({bounds.low}) must be <= high ({bounds.high})")
         _check(not bounds.log or bounds.low > 0, f"{where}: log=true needs low > 0, got {bounds.low}")
         for kind in (k for k in kinds if name in kind_params(k)):
@@ -204,6 +223,14 @@ def enqueued_kind(params: dict[str, Any], kinds: list[str]) -> str | None:
     return fitting[0] if len(fitting) == 1 else None
 
 
+def taken_by(params: dict[str, Any], kinds: list[str]) -> bool:
+    """Whether a searched kind takes an enqueued set: the kind it names is searched, or it names none and its
+    keys are among a searched kind's parameters."""
+    if "kind" in params:
+        return params["kind"] in kinds
+    return any(set(params) - {"lambda_h"} <= set(kind_params(kind)) for kind in kinds)
+
+
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
     """An enqueued set as Optuna stores it (:func:`hersd.study.stored_params`), its kind inferred."""
     return stored_params({"kind": enqueued_kind(params, kinds), **params}, kinds)
@@ -245,6 +272,33 @@ def validate(search: SearchConfig) -> None:
     _check(search.storage != JOURNAL_PREFIX, "search.storage=journal:<path> needs a file path after 'journal:'")
 
 
+def split_range_overrides(overrides: list[str]) -> tuple[list[str], dict[str, Bounds]]:
+    """``search.space.ranges={name: {low, high}}`` and ``search.space.ranges.<name>={low, high}`` (``+`` or not)
+    -> (the other overrides, the ranges they set); Hydra cannot add a key to a typed mapping, so these are read here."""
+    import yaml
+
+    rest, ranges = [], {}
+    for override in overrides:
+        key, _, value = override.partition("=")
+        key = key.lstrip("+")
+        if key != RANGES_KEY and not (key.startswith(f"{RANGES_KEY}.") and key.count(".") == RANGES_KEY.count(".") + 1):
+            rest.append(override)
+            continue
+        try:
+            parsed = yaml.safe_load(value)
+        except yaml.YAMLError:
+            parsed = None
+        given = parsed if key == RANGES_KEY else {key.rpartition(".")[2]: parsed}
+        _check(isinstance(given, dict) and all(isinstance(bounds, dict) for bounds in given.values()),
+               f"{override}: give a range as {RANGES_KEY}.<setting>={{low: 1, high: 50}} or "
+               f"{RANGES_KEY}={{<setting>: {{low: 1, high: 50}}}}")
+        for name, bounds in given.items():
+            _check(set(bounds) in ({"low", "high"}, {"low", "high", "log"}),
+                   f"{RANGES_KEY}.{name}: give low and high (and log), got {', '.join(map(str, bounds)) or 'none'}")
+            ranges[str(name)] = Bounds(**bounds)
+    return rest, ranges
+
+
 def register_schema() -> None:
     """Put :class:`SearchConfig` in Hydra's ConfigStore as ``search/search_schema``."""
     store_schema("search_schema", SearchConfig, group="search")
@@ -268,15 +322,21 @@ def compose_search(search_name: str, overrides: list[str]) -> SearchConfig:
     from omegaconf.errors import OmegaConfBaseException
 
     register_schema()
+    overrides, ranges = split_range_overrides(overrides)
     try:
         composed = compose(None, [f"+search={search_name}", *map(_merge_at_parent, overrides)],
                            job_name="hersd-search")
         search = OmegaConf.to_object(composed.search)
+        search.space.ranges.update(ranges)
     except MissingConfigException:
         raise ConfigError(f"search={search_name} is not a known search; choose one of: "
                           f"{', '.join(group_options('search'))}") from None
     except (HydraException, OmegaConfBaseException) as err:
         raise ConfigError(_composition_error(err)) from None
+    check_space(search.space)  # the kinds known, before the file's sets are matched to them
+    if not any(override.partition("=")[0].lstrip("+~") == "search.enqueue" for override in overrides):
+        # the file's sets (e.g. the paper's point) only where the searched kinds take them; the command's all
+        search.enqueue = [params for params in search.enqueue if taken_by(params, list(search.space.kinds))]
     validate(search)
     return search
 

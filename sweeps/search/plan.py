@@ -21,7 +21,7 @@ from hersd.resources import resolve_threads
 from hersd.runstore import check_writable, config_hash
 from hersd.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
 from sweeps.search.storage import resolve_storage
-from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds
+from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds, space_record
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every
 # run of every trial would share one directory.
@@ -97,8 +97,8 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
 
 def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str = "default") -> SearchPlan:
     """Compose the base training config once; check it and derive the study's name, storage and settings."""
-    # search_name (the conf/search file) is part of the default study name: another search file
-    # starts another study, while narrowed or widened ranges continue the same one.
+    # search_name (the conf/search file) and the search space (kinds, ranges) are part of the default study
+    # name: another file or another space starts another study; n_trials and the workers do not.
     refuse_searched_keys(train_overrides, search)
     base = compose_train(train_overrides)
     if not any(override.split("=", 1)[0].lstrip("+~") == "quiet" for override in train_overrides):
@@ -112,7 +112,8 @@ def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str
     check_writable(Path(base.results_dir))  # the runs go here, the default storage below it
     search_dir = Path(base.results_dir).resolve() / SEARCH_FOLDER
     settings = study_settings(search, base)
-    digest = hashlib.sha256(json.dumps(asdict(settings), sort_keys=True).encode()).hexdigest()[:8]
+    identity = {**asdict(settings), "space": space_record(search.space)}  # what it measures, over what it draws
+    digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:8]
     study_name = search.study_name or f"{base.task.name}-{base.algo.name}-{search_name}-{digest}"
     storage = storage or default_storage(base.results_dir, study_name)
     return SearchPlan(search=search, base=base, train_overrides=list(train_overrides), study_name=study_name,

@@ -74,10 +74,13 @@ def _sqlite_storage_class() -> type:
         """
 
         def __init__(self, path: Path) -> None:
-            """Open (creating) the SQLite file at ``path``; its claim lock is ``<path>.lock``."""
-            super().__init__(f"{SQLITE_PREFIX}{path}",
-                             engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
+            """Open (creating) the SQLite file at ``path``; its claim lock is ``<path>.lock``, held while Optuna
+            creates its tables too (two commands starting on one new file would both create them)."""
             self.claim_lock_path = path.with_name(path.name + ".lock")
+            with open(self.claim_lock_path, "a") as lock_file:
+                fcntl.flock(lock_file, fcntl.LOCK_EX)
+                super().__init__(f"{SQLITE_PREFIX}{path}",
+                                 engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
 
         def set_trial_state_values(self, trial_id: int, state: TrialState, values=None) -> bool:
             """Optuna's state change; the change to RUNNING (a claim) under the file lock."""

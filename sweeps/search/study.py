@@ -18,19 +18,47 @@ from optuna.trial import FrozenTrial, TrialState
 
 from hersd.config import ConfigError
 from hersd.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
-from sweeps.search.config import SamplerConfig, enqueued_params
+from sweeps.search.config import SamplerConfig, enqueued_params, space_record
 from sweeps.search.plan import SearchPlan
 
-FINISHED_STATES = (TrialState.COMPLETE, TrialState.PRUNED)  # what search.n_trials counts
+FINISHED_STATES = (TrialState.COMPLETE, TrialState.PRUNED)  # what search.n_trials counts, less skipped trials
+SKIPPED_ATTR = "skipped"  # trial: pruned unrun, because another worker held its run (the same parameters): why
+ERROR_ATTR = "error"  # trial: the exception that failed it, on one line (the command names the first)
+SPACE_ATTR = "space"  # study: what it draws (sweeps.search.config.space_record), set when it is created
 
 
-def make_sampler(sampler: SamplerConfig, worker_index: int, trials_before: int) -> optuna.samplers.TPESampler:
-    """Seeded TPE; the seed mixes in the worker and the study's size (no two workers replay the same draws)."""
-    seed = int(np.random.SeedSequence([sampler.seed, worker_index, trials_before]).generate_state(1)[0])
+class TrialSeededTPE(optuna.samplers.TPESampler):
+    """TPE whose random draws of trial n come from (sampler.seed, n): every trial number is unique in a study,
+    so workers started apart (other commands, other hosts) never draw alike, and a study's draws are reproducible."""
+
+    def __init__(self, seed: int, **settings) -> None:
+        super().__init__(seed=seed, **settings)
+        self.base_seed = seed
+
+    def before_trial(self, study: optuna.Study, trial: FrozenTrial) -> None:
+        seed = int(np.random.SeedSequence([self.base_seed, trial.number]).generate_state(1)[0])
+        self._rng.rng.seed(seed)  # TPE's own draws and its random sampler's (the startup trials)
+        self._random_sampler._rng.rng.seed(seed)
+        super().before_trial(study, trial)
+
+
+def make_sampler(sampler: SamplerConfig) -> optuna.samplers.TPESampler:
+    """Seeded TPE, each trial's draws seeded by (sampler.seed, trial number) (:class:`TrialSeededTPE`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ExperimentalWarning)
-        return optuna.samplers.TPESampler(seed=seed, n_startup_trials=sampler.n_startup_trials,
-                                          multivariate=sampler.multivariate, group=sampler.multivariate)
+        return TrialSeededTPE(sampler.seed, n_startup_trials=sampler.n_startup_trials,
+                              multivariate=sampler.multivariate, group=sampler.multivariate)
+
+
+class StopWhenDone:
+    """Optuna callback: stop the study once it holds ``n_trials`` complete or pruned trials, not counting skipped ones."""
+
+    def __init__(self, n_trials: int) -> None:
+        self.n_trials = n_trials
+
+    def __call__(self, study: optuna.Study, trial: FrozenTrial) -> None:
+        if count_finished(study) >= self.n_trials:
+            study.stop()
 
 
 def make_pruner(plan: SearchPlan) -> optuna.pruners.BasePruner:
@@ -54,6 +82,7 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
         except optuna.exceptions.DuplicatedStudyError:  # another machine created it first
             return open_study(plan, storage)
         study.set_user_attr(SETTINGS_ATTR, asdict(plan.settings))
+        study.set_user_attr(SPACE_ATTR, space_record(plan.search.space))
         study.set_user_attr(TRAIN_OVERRIDES_ATTR, plan.train_overrides)
         for params in plan.search.enqueue:
             study.enqueue_trial(enqueued_params(params, list(plan.search.space.kinds)))
@@ -64,18 +93,34 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
         changed = sorted(k for k in settings if stored.get(k) != settings[k])
         raise ConfigError(f"study {plan.study_name!r} was made with other settings ({', '.join(changed)} differ: "
                           f"{ {k: stored.get(k) for k in changed} }); choose another search.study_name")
+    space = study.user_attrs.get(SPACE_ATTR)
+    if space is not None and space != space_record(plan.search.space):
+        raise ConfigError(f"study {plan.study_name!r} draws from another search space ({space}); choose another "
+                          f"search.study_name, or the space it was made with")
     return study
 
 
 def count_finished(study: optuna.Study) -> int:
-    """Complete plus pruned trials: what ``search.n_trials`` counts."""
-    return len(study.get_trials(deepcopy=False, states=FINISHED_STATES))
+    """Complete plus pruned trials, less skipped ones: what ``search.n_trials`` counts."""
+    return sum(SKIPPED_ATTR not in trial.user_attrs for trial in study.get_trials(deepcopy=False, states=FINISHED_STATES))
 
 
 def trial_counts(study: optuna.Study) -> dict[str, int]:
-    """{"complete": n, "pruned": n, "fail": n}."""
-    return {state.name.lower(): len(study.get_trials(deepcopy=False, states=(state,)))
-            for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL)}
+    """{"complete": n, "pruned": n, "fail": n, "skipped": n}."""
+    trials = study.get_trials(deepcopy=False)
+    counts = {state.name.lower(): sum(trial.state == state and SKIPPED_ATTR not in trial.user_attrs for trial in trials)
+              for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL)}
+    return {**counts, "skipped": sum(SKIPPED_ATTR in trial.user_attrs for trial in trials)}
+
+
+def first_error(study: optuna.Study, first_trial: int) -> str | None:
+    """If no trial from number ``first_trial`` on finished and some failed: the first failure (``trial n: error``)."""
+    trials = [trial for trial in study.get_trials(deepcopy=False) if trial.number >= first_trial]
+    failed = [trial for trial in trials if trial.state == TrialState.FAIL]
+    if not failed or any(trial.state in FINISHED_STATES for trial in trials):
+        return None
+    reason = failed[0].user_attrs.get(ERROR_ATTR) or failed[0].user_attrs.get("refused") or "see the warnings above"
+    return f"trial {failed[0].number}: {reason}"
 
 
 def _pid_alive(pid: int) -> bool:

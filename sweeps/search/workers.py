@@ -26,7 +26,7 @@ from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
 from sweeps.search.plan import SearchPlan, run_threads
-from sweeps.search.study import FINISHED_STATES, make_pruner, make_sampler
+from sweeps.search.study import StopWhenDone, make_pruner, make_sampler
 
 SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
 SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
@@ -39,16 +39,14 @@ def _exit_when_orphaned(parent_pid: int) -> None:
     os._exit(1)
 
 
-def run_worker(plan: SearchPlan, worker_index: int, n_trials: int, trials_before: int, concurrent_runs: int,
-               parent_pid: int | None = None) -> None:
+def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid: int | None = None) -> None:
     """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores."""
     if parent_pid is not None:
         threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
     threads, refusals = run_threads(plan.base, concurrent_runs), []
     study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
-                              sampler=make_sampler(plan.search.sampler, worker_index, trials_before),
-                              pruner=make_pruner(plan))
-    stop_when_done = optuna.study.MaxTrialsCallback(plan.search.n_trials, states=FINISHED_STATES)
+                              sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
+    stop_when_done = StopWhenDone(plan.search.n_trials)
     try:
         study.optimize(partial(objective, plan=plan, threads=threads, refusals=refusals), n_trials=n_trials,
                        catch=(Exception,), callbacks=[stop_when_done])
@@ -69,14 +67,14 @@ def split_trials(n_trials: int, n_workers: int) -> list[int]:
     return [n_trials // n_workers + (i < n_trials % n_workers) for i in range(n_workers)]
 
 
-def run_local(plan: SearchPlan, shares: list[int], trials_before: int) -> list[int]:
+def run_local(plan: SearchPlan, shares: list[int]) -> list[int]:
     """Run the workers here: in this process if one, else as spawned processes -> their exit codes."""
     if len(shares) == 1:
-        run_worker(plan, 0, shares[0], trials_before, concurrent_runs=1)
+        run_worker(plan, shares[0], concurrent_runs=1)
         return [0]
     context = multiprocessing.get_context("spawn")  # no fork: torch, MuJoCo and open DB connections
     workers = [context.Process(target=run_worker, name=f"hersd-search-{i}",
-                               args=(plan, i, share, trials_before, len(shares), os.getpid()))
+                               args=(plan, share, len(shares), os.getpid()))
                for i, share in enumerate(shares)]
     for worker in workers:
         worker.start()
@@ -126,7 +124,7 @@ def check_slurm(slurm: SlurmConfig) -> None:
                           f"choose among: {', '.join(known)}")
 
 
-def submit_slurm(plan: SearchPlan, shares: list[int], trials_before: int) -> list[str]:
+def submit_slurm(plan: SearchPlan, shares: list[int]) -> list[str]:
     """Submit one SLURM job per worker (a submitit job array) -> job ids; ConfigError if SLURM refuses."""
     import submitit
 
@@ -137,7 +135,7 @@ def submit_slurm(plan: SearchPlan, shares: list[int], trials_before: int) -> lis
                                    cpus_per_task=settings["cpus_per_task"], mem_gb=settings["mem_gb"],
                                    **({"slurm_partition": settings["partition"]} if settings["partition"] else {}))
         n = len(shares)
-        jobs = executor.map_array(run_worker, [plan] * n, list(range(n)), shares, [trials_before] * n, [1] * n)
+        jobs = executor.map_array(run_worker, [plan] * n, shares, [1] * n)
     except Exception as err:  # noqa: BLE001 - no SLURM here, or sbatch refused the jobs
         raise ConfigError(f"search.launcher=slurm: {' '.join(str(err).split())[:300]}") from None
     return [job.job_id for job in jobs]

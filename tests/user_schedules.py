@@ -1,0 +1,85 @@
+"""A newcomer's schedules, in a module outside hersd that the tests write into a temporary folder
+(``write_module``) and put on the path of a fresh interpreter (``command``): tests/test_user_schedule.py and
+tests/test_search_schedules.py import this."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+MODULE = "newcomer_steps"
+
+# KStep declares no tag, label or kind: the defaults name its folders. Over's rate leaves [0, 1] from the
+# start, LateOver's (adaptive) at epoch 2; Boom's rate raises once a run is under way (epoch 2), after the checks.
+SOURCE = '''
+from dataclasses import dataclass
+
+from hersd.schedules import Schedule, param
+
+
+@dataclass
+class KStep(Schedule):
+    formula = "eps(k) = high for k <= k0, low after"
+    searched = ("low", "k0")
+
+    high: float = param(0.9, 0.0, 1.0, "the rate until epoch k0")
+    low: float = param(0.5, 0.0, 1.0, "the rate after epoch k0")
+    k0: int = param(1, 1, 10_000, "the last epoch at the high rate", integer=True)
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.high if k <= self.k0 else self.low
+
+
+@dataclass
+class Over(KStep):
+    high: float = param(1.4, 0.0, 2.0, "a rate no schedule may give")
+
+
+@dataclass
+class LateOver(Schedule):
+    adaptive = True
+
+    def rate(self, k, total_epochs, train_success=()):
+        return 0.9 if k == 1 else 1.4
+
+
+@dataclass
+class Boom(KStep):
+    def rate(self, k, total_epochs, train_success=()):
+        if len(train_success) >= 1:
+            raise RuntimeError("boom at epoch %d" % k)
+        return super().rate(k, total_epochs, train_success)
+'''
+
+
+def write_module(folder: Path) -> Path:
+    """The module ``newcomer_steps`` written into ``folder`` -> ``folder``."""
+    (folder / f"{MODULE}.py").write_text(SOURCE)
+    return folder
+
+
+def command(module_main: str, args: list[str], module_dir: Path, code: int | None = 0,
+            cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """A command's entry point in a fresh interpreter with ``module_dir`` on PYTHONPATH, asserting its exit code
+    (None: any); started with ``background=True`` semantics by :func:`start`."""
+    result = subprocess.run(argv(module_main, args), capture_output=True, text=True, timeout=600,
+                            env=environment(module_dir), cwd=cwd)
+    assert code is None or result.returncode == code, result.stdout[-3000:] + result.stderr[-3000:]
+    return result
+
+
+def start(module_main: str, args: list[str], module_dir: Path) -> subprocess.Popen:
+    """The command of :func:`command` started, not awaited."""
+    return subprocess.Popen(argv(module_main, args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=environment(module_dir))
+
+
+def argv(module_main: str, args: list[str]) -> list[str]:
+    module, function = module_main.split(":")
+    return [sys.executable, "-c", f"import sys; from {module} import {function}; sys.exit({function}())", *args]
+
+
+def environment(module_dir: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(module_dir), os.environ.get("PYTHONPATH", "")])}
