@@ -175,3 +175,18 @@ def test_a_table_replaying_a_success_runs_log_computes_that_run_again(tmp_path):
     replay = train(compose_train([*args, "schedule=table", f"schedule.from_run={adaptive.parent}"]))
     assert replay.parent.parent.name.startswith("table-") and replay.parent != adaptive.parent
     assert metrics(replay).equals(metrics(adaptive))
+
+
+def test_an_exponential_schedule_with_beta2_0_is_the_linear_one_and_finds_its_committed_runs():
+    """+grid=beta's beta2 = 0 column: its runs are linear 0.25's, committed under linear-b1_0.25."""
+    from pathlib import Path
+
+    from hersd.compose import compose_train
+    from hersd.runstore import run_dir
+    from hersd.schedules import Linear
+
+    made = [compose_train(["task=push", "seed=0", *schedule]) for schedule in (
+        ["schedule.kind=exponential", "schedule.beta1=0.25", "schedule.beta2=0.0"], ["schedule=linear"])]
+    assert all(isinstance(cfg.schedule, Linear) for cfg in made)
+    assert run_dir(made[0]) == run_dir(made[1]) and run_dir(made[0]).parent.name == "linear-b1_0.25"
+    assert (Path(__file__).resolve().parents[1] / run_dir(made[0]) / "run.mcap").is_file()  # a committed run
