@@ -53,15 +53,12 @@ def session_rows(sessions: list[dict[str, Any]], message_times: list[tuple[str, 
     """One dict per session of a log: its ``resumed_from_epoch``, ``git_commit``, ``threads``, ``cpu``,
     ``flush_denormal`` (None where the session's metadata lacks it), ``started`` and ``ended`` (ns since the
     Unix epoch: its ``start_time``, else its metadata message's log time; the log time of its last message in
-    the file; logs written before resumes kept the earlier messages' log times give earlier sessions the
+    the file before the next session's metadata; logs written before resumes kept the earlier messages' log times give earlier sessions the
     resume's time, but the last session's is exact). ``sessions``: the metadata in file order; ``message_times``:
     (topic, log time) of every message in file order."""
-    spans: list[list[int]] = []
-    for topic, log_time in message_times:
-        if topic == "/run/meta":
-            spans.append([log_time, log_time])
-        elif spans:
-            spans[-1][1] = max(spans[-1][1], log_time)
+    starts = [index for index, (topic, _) in enumerate(message_times) if topic == "/run/meta"]
+    spans = [(message_times[start][1], message_times[end - 1][1])
+             for start, end in zip(starts, [*starts[1:], len(message_times)])]
     return [{"resumed_from_epoch": int(meta.get("resumed_from_epoch") or 0),
              "git_commit": meta.get("git_commit"),
              "threads": meta.get("threads"),

@@ -102,7 +102,7 @@ def test_the_report_writes_the_table_and_shows_it_with_its_note_once(logs, tmp_p
 
 def test_session_spans_follow_the_metadata_messages():
     sessions = [{"resumed_from_epoch": 0, "start_time": "bad"}, {"resumed_from_epoch": 2}]
-    times = [("/run/meta", 10), ("/epoch", 30), ("/epoch", 20), ("/run/meta", 40), ("/epoch", 50), ("/run/status", 60)]
+    times = [("/run/meta", 10), ("/epoch", 20), ("/epoch", 30), ("/run/meta", 40), ("/epoch", 50), ("/run/status", 60)]
     rows = session_rows(sessions, times)
     assert [(row["started"], row["ended"]) for row in rows] == [(10, 30), (40, 60)]  # no start_time: the log time
     assert rows[1]["git_commit"] is None and rows[1]["cpu"] is None and rows[1]["flush_denormal"] is None
