@@ -545,8 +545,8 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     styles = config_styles(analysis)
     found = []
     for task in ordered_tasks(seeds["task"]):
-        caption = (f"{task_title(task)}: each configuration's outcome against its mean relabel rate μ_ε = (1/K) Σ ε(k): "
-                   "eq. 10 exactly for schedules of the epoch (squares: constant rates, HER at 0.8; circles: "
+        caption = (f"{task_title(task)}: each configuration's outcome against its mean relabel rate "
+                   "μ_ε = (1/K) Σ ε(k): eq. 10 exactly for schedules of the epoch (squares: constant rates, HER at 0.8; circles: "
                    "decays), the realised mean of the logged rates for adaptive ones (diamonds: each seed at its "
                    "own, the marker at their median, the horizontal bar their range). Left: the mean raw test "
                    "success over the K epochs (higher is better); right: the first epoch the "
@@ -573,24 +573,12 @@ def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: 
     legend_width = _legend_width([*arms["config"].astype(str), "the paper's best fixed ε"])
     figure, axes = _panels(len(MEAN_RATE_PANELS), f"{task_title(task)}: outcome against the mean relabel rate μ_ε",
                            legend_width=legend_width, sharey=False)
-    low = min(MU_EPS_BAND[0], arms["mu_low"].min())
-    high = max(MU_EPS_BAND[1], arms["mu_high"].max())
+    low, high = min(MU_EPS_BAND[0], arms["mu_low"].min()), max(MU_EPS_BAND[1], arms["mu_high"].max())
     span = max(high - low, 0.05)
-    x = _dodged(arms, span)
-    offsets = dict(zip(arms["config"], x - arms["mu_eps"]))
+    arms = arms.assign(x=_dodged(arms, span), colour=[styles[config]["color"] for config in arms["config"]])
+    seeds = seeds.merge(arms[["config", "x", "colour"]].assign(shift=arms["x"] - arms["mu_eps"]), on="config")
     for axis, (outcome, title, ylabel) in zip(axes, MEAN_RATE_PANELS):
-        axis.axvspan(*MU_EPS_BAND, color="0.88", zorder=0, linewidth=0, label="the paper's best fixed ε")
-        for arm, position in zip(arms.to_dict("records"), x):
-            own = seeds[seeds["config"] == arm["config"]]
-            colour = styles[arm["config"]]["color"]
-            axis.scatter(own["mu_eps"] + offsets[arm["config"]], own[outcome], s=12, color=colour, alpha=0.5,
-                         linewidths=0, zorder=2)
-            median = arm[outcome]
-            spread = [[arm["mu_eps"] - arm["mu_low"]], [arm["mu_high"] - arm["mu_eps"]]]
-            axis.errorbar([position], [median], yerr=[[median - arm[f"{outcome}_low"]], [arm[f"{outcome}_high"] - median]],
-                          xerr=spread if arm["kind"] == "adaptive" else None, marker=MEAN_RATE_MARKERS[arm["kind"]],
-                          markersize=7, color=colour, markeredgecolor="black", markeredgewidth=0.6, capsize=3,
-                          linestyle="none", zorder=3, label=_legend_label(arm["config"]))
+        _mean_rate_panel(axis, seeds, arms, outcome)
         axis.set_xlim(low - 0.1 * span, high + 0.1 * span)
         _set_title(axis, _fitting(title, PANEL_SIZE[0], PANEL_TITLE_SIZE))
         axis.set_ylabel(ylabel)
@@ -598,8 +586,30 @@ def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: 
     if seeds["never"].any():
         axes[1].axhline(seeds["total_epochs"].max(), color="0.4", linewidth=0.8, linestyle=":")
     axes[0].set_ylim(-0.02, 1.02)
+    for arm in arms.itertuples(index=False):  # legend entries only: empty lines cost nothing to draw
+        axes[0].plot([], [], marker=MEAN_RATE_MARKERS[arm.kind], markersize=7, color=arm.colour, linestyle="none",
+                     markeredgecolor="black", markeredgewidth=0.6, label=_legend_label(arm.config))
     _figure_legend(figure, axes, legend_width)
     return figure
+
+
+def _mean_rate_panel(axis, seeds: pd.DataFrame, arms: pd.DataFrame, outcome: str) -> None:
+    """One panel of Fig. 12: the band, every seed's ``outcome`` at its (dodged) mu_eps, and each arm's median
+    marker with a vertical bar over its seeds' range (an adaptive arm also a horizontal one over their mu_eps);
+    one artist per kind of mark (gid: seeds, range, mu_range, median), not one per arm: fewer to draw."""
+    axis.axvspan(*MU_EPS_BAND, color="0.88", zorder=0, linewidth=0, label="the paper's best fixed ε")
+    axis.scatter(seeds["mu_eps"] + seeds["shift"], seeds[outcome], s=12, c=list(seeds["colour"]), alpha=0.5,
+                 linewidths=0, zorder=2, gid="seeds")
+    axis.vlines(arms["x"], arms[f"{outcome}_low"], arms[f"{outcome}_high"], colors=list(arms["colour"]), linewidth=1.2,
+                zorder=2, gid="range")
+    adaptive = arms[arms["kind"] == "adaptive"]
+    if not adaptive.empty:
+        shift = adaptive["x"] - adaptive["mu_eps"]
+        axis.hlines(adaptive[outcome], adaptive["mu_low"] + shift, adaptive["mu_high"] + shift,
+                    colors=list(adaptive["colour"]), linewidth=1.2, zorder=2, gid="mu_range")
+    for kind, group in arms.groupby("kind", sort=False):
+        axis.scatter(group["x"], group[outcome], s=50, c=list(group["colour"]), marker=MEAN_RATE_MARKERS[kind],
+                     edgecolors="black", linewidths=0.6, zorder=3, gid="median")
 
 
 FIGURE_BUILDERS: list[Callable[[Analysis], list[ReportFigure]]] = [

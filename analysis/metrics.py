@@ -424,7 +424,8 @@ def _config_rank(runs: pd.DataFrame):
 def _outcome_grids(curves: pd.DataFrame) -> pd.DataFrame:
     """Per run (index): the denominator of each EQUAL_MU_OUTCOMES value (epochs: 1; NaN: no grid)."""
     by_run = curves.groupby("run", sort=True)
-    grids = pd.DataFrame({"final": by_run["smoothed_grid"].last(), RUN_AUC: by_run["success_grid"].first() * by_run.size()})
+    grids = pd.DataFrame({"final": by_run["smoothed_grid"].last(),
+                          RUN_AUC: by_run["success_grid"].first() * by_run.size()})
     return grids.assign(**{column: 1.0 for column in RUN_OUTCOME_COLUMNS[1:]})
 
 
@@ -449,7 +450,8 @@ def equal_mu_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, curves: pd.DataFr
         x, y = signed[(pair.task, pair.config)][1], signed[(pair.task, pair.versus)][1]
         p_values = [stats.permutation_test((x, y), _mean_difference, permutation_type="independent", vectorized=True,
                                            alternative=alternative, n_resamples=PERMUTATION_RESAMPLES, axis=-1,
-                                           rng=np.random.default_rng(seed)).pvalue for alternative in ("greater", "less")]
+                                           rng=np.random.default_rng(seed)).pvalue
+                    for alternative in ("greater", "less")]
         splits = math.comb(x.shape[1] + y.shape[1], x.shape[1])
         smallest = 1 / splits if splits <= PERMUTATION_RESAMPLES else 1 / (PERMUTATION_RESAMPLES + 1)
         means = [on_grid((sign[:, None] * values).mean(axis=1),

@@ -57,16 +57,17 @@ def test_no_figure_without_its_data(hand_sized):
     assert q_figures(her_only) == []  # nothing to compare HER with
 
 
-def _arm_markers(axis) -> dict[str, tuple]:
-    """config -> ((x, y) of its median marker, its vertical bar's (low, high), its horizontal bar or None)."""
-    arms = {}
-    for container in axis.containers:  # one ErrorbarContainer per configuration
-        line, _, bars = container.lines
-        ((x, y),) = line.get_xydata()
-        vertical = bars[-1].get_segments()[0][:, 1]
-        horizontal = bars[0].get_segments()[0][:, 0] if container.has_xerr else None
-        arms[container.get_label()] = ((x, y), tuple(sorted(vertical)), horizontal)
-    return arms
+def _arm_marks(axis) -> dict[str, list]:
+    """Fig. 12's marks of a panel by gid: median -> [(x, y)], range / mu_range -> [(low, high)], seeds -> [(x, y)]."""
+    marks = {"median": [], "range": [], "mu_range": [], "seeds": []}
+    for collection in axis.collections:
+        if collection.get_gid() in ("median", "seeds"):
+            marks[collection.get_gid()] += [tuple(point) for point in collection.get_offsets()]
+        elif collection.get_gid() in ("range", "mu_range"):
+            axis_index = 1 if collection.get_gid() == "range" else 0
+            marks[collection.get_gid()] += [tuple(sorted(segment[:, axis_index]))
+                                            for segment in collection.get_segments()]
+    return marks
 
 
 def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_range_of_its_seeds(tmp_path):
@@ -85,15 +86,15 @@ def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_ran
     figure = report_figure.draw()
     auc_axis, epochs_axis = figure.axes
     rates = analysis.runs[analysis.runs["complete"] & (analysis.runs["schedule"] == "success")]["mu_eps"]
-    auc, epochs = _arm_markers(auc_axis), _arm_markers(epochs_axis)
-    assert auc["HER"] == ((0.8, 0.5), (0.0, 1.0), None)
-    assert epochs["HER"][0] == (0.8, 5) and epochs["HER"][1] == (1, 7)  # a seed that never reaches 0.5: K + 1
-    (success_x, success_y), _, success_spread = auc["success b1=0.5"]
-    assert success_x == pytest.approx(rates.median()) and success_spread == pytest.approx([rates.min(), rates.max()])
-    linear_x, control_x = auc["linear b1=0.5"][0][0], auc["HER eps=0.708333"][0][0]
+    auc, epochs = _arm_marks(auc_axis), _arm_marks(epochs_axis)
+    # the arms in configuration order: the control (17/24), HER, linear (17/24), success-driven
+    (control_x, control_y), her, (linear_x, linear_y), (success_x, success_y) = auc["median"]
+    assert her == (0.8, 0.5) and control_y == linear_y == 0.5  # raw AUC 0, 0.5, 1: median 0.5
+    assert auc["range"] == [(0.0, 1.0)] * 4
+    assert epochs["median"][1] == (0.8, 5) and epochs["range"][1] == (1, 7)  # a seed never at 0.5: K + 1
     assert control_x < linear_x and (linear_x + control_x) / 2 == pytest.approx(17 / 24)  # side by side
-    seeds = [collection for collection in auc_axis.collections if len(collection.get_offsets()) == 3]
-    assert len(seeds) == 4  # each configuration's three complete seeds
+    assert success_x == pytest.approx(rates.median()) and auc["mu_range"] == [pytest.approx((rates.min(), rates.max()))]
+    assert len(auc["seeds"]) == 12  # each configuration's three complete seeds
     band = [patch for patch in auc_axis.patches if patch.get_label() == "the paper's best fixed ε"]
     assert len(band) == 1 and band[0].get_path().get_extents(band[0].get_patch_transform()).x0 == pytest.approx(0.8)
     labels = [text.get_text() for text in figure.legends[0].get_texts()]
