@@ -126,7 +126,7 @@ def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.Data
     cells = pd.DataFrame.from_records([{"run": run, **_run_provenance(rows)} for run, rows in by_run.items()],
                                       columns=["run", *SESSION_CELLS])
     seconds = epochs.groupby("run")["epoch_seconds"].median().rename("seconds_per_epoch")
-    own = runs.drop(columns=[name for name in SESSION_CELLS if name in runs.columns])  # the run table's cpu: its first
+    own = runs.drop(columns=[name for name in SESSION_CELLS if name in runs.columns])  # runs.cpu: the first session's
     table = (own.merge(cells, on="run", how="left").merge(seconds, left_on="run", right_index=True, how="left")
              .assign(folder=[path.rsplit("/", 1)[0] if "/" in path else "." for path in runs["path"]],
                      task_order=runs["task"].map(lambda task: task_rank(task)[0])))

@@ -67,7 +67,7 @@ def test_a_resumed_run_shows_each_sessions_commit_machine_and_the_resume_epoch(l
     assert before <= row["last_date"] <= after  # the log's last message, written just now
 
 
-def test_a_run_in_progress_and_a_clean_single_session(logs):
+def test_a_run_in_progress_has_one_session_and_no_resume(logs):
     folder, _, _ = logs
     row = provenance(folder).loc[2]
     assert (row["epochs_done"], row["total_epochs"], row["complete"]) == (2, 6, False)
