@@ -28,6 +28,7 @@ import pandas as pd
 
 from analysis.load import HER_WEIGHTS, config_label
 from analysis.metrics import PERMUTATION_RESAMPLES
+from hersd.envs.tasks import task_title
 from hersd.schedules.constant import Constant
 from hersd.schedules.exponential import Exponential
 from hersd.schedules.linear import Linear
@@ -173,7 +174,7 @@ def claims_markdown(table: pd.DataFrame) -> str:
     """The claims table as GitHub markdown, one table per task (the lines docs/RESULTS.md holds)."""
     parts = []
     for task, rows in table.groupby("task", sort=False):
-        lines = [f"**{task}**", "", "| claim | paper | hersd | seeds | test | p | verdict |", "| --- " * 7 + "|"]
+        lines = [f"**{task_title(task)}**", "", "| claim | paper | hersd | seeds | test | p | verdict |", "| --- " * 7 + "|"]
         for row in rows.itertuples():
             p = "" if not np.isfinite(row.p) else f"{row.p:.2g}"
             lines.append(f"| {row.claim} | {row.paper} | {row.hersd} | {row.seeds} | {row.test} | {p} | {row.verdict} |")

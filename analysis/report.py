@@ -245,7 +245,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
         parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")
     if not claims.empty:
-        parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(claims)]
+        parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(_titled(claims))]
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
               html_table(_titled(analysis.summary.drop(columns="mu_eps")),  # wider than the page: in Fig. 12
                          epochs=_common_epochs(analysis.summary, runs)),
