@@ -16,7 +16,9 @@ import hersd.learners.base as base
 from hersd.compose import compose_train
 from hersd.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
 from hersd.learners import learner_class
+from hersd.runlog import read_run
 from hersd.runstore import config_hash, run_identity
+from hersd.train import train
 
 LEARNERS = ("ddpg", "td3", "sac")
 
@@ -100,3 +102,13 @@ def test_bf16_is_another_runs_identity_and_fp32_that_of_runs_made_before_the_set
     before = config_record(fp32)
     del before["precision"]
     assert run_identity(before) == run_identity(fp32) and "precision" not in run_identity(fp32)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not base.cpu_has_bf16(), reason="this CPU has no bf16 instructions: hersd refuses bf16 here")
+def test_bf16_ddpg_learns_fetch_reach(tmp_path):
+    """Paper settings on FetchReach, seed 0, precision=bf16: test success >= 0.9 within 5 epochs, as fp32
+    (docs/LEARNERS.md, "Precision", gives both runs epoch by epoch)."""
+    log = read_run(train(compose_train(["task=reach", "precision=bf16", "epochs=5", "seed=0", "quiet=true",
+                                        "threads=1", "bias.epochs=[]", f"results_dir={tmp_path}"])))
+    assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()

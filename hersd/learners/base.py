@@ -18,7 +18,9 @@ names it (:mod:`hersd.run_state` and :mod:`hersd.train` look it up by name, :fun
 Shared here: :class:`RunningNormalizer`, :func:`mlp`, :class:`UpdateStats`, :func:`frozen_q` (a
 critic through detached parameters, for actor losses), and in :class:`GoalConditionedLearner` the
 normalised inputs, the critics' loss and the minimum of their targets (one critic: DDPG; twins:
-TD3, SAC), the polyak move of the targets, ``policy_value`` and the checkpoint of ``PARTS``.
+TD3, SAC), the polyak move of the targets, ``policy_value`` and the checkpoint of ``PARTS``; and
+``precision`` (docs/LEARNERS.md, "Precision"): ``matmul_context``, where ``update`` runs its passes
+(bf16 autocast or nothing), and float32 output layers (:class:`FullPrecisionLinear`) under bf16.
 """
 
 from __future__ import annotations
