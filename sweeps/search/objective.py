@@ -9,6 +9,7 @@ the trial.
 
 from __future__ import annotations
 
+import math
 import os
 import shlex
 import socket
@@ -21,20 +22,25 @@ import optuna
 
 from hersd.config import ConfigError, TrainConfig
 from hersd.runlog import read_records
-from hersd.runstore import RunFolder, run_dir
-from hersd.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, mean_rates, param_overrides, trial_config
-from sweeps.search.config import SpaceConfig, space_bounds
+from hersd.runstore import RunFolder, RunLockedError, run_dir
+from hersd.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, one_line, mean_rates, param_overrides, trial_config
+from sweeps.search.config import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
+from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR
 
 
 def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
-    """Draw a trial's schedule -> {"kind", then the kind's searched parameters [, "lambda_h"]: float}."""
+    """Draw a trial's schedule -> {"kind", then the kind's searched parameters [, "lambda_h"]: int for whole-number
+    settings, else float}."""
     kinds = list(space.kinds)
     kind = trial.suggest_categorical("kind", kinds) if len(kinds) > 1 else kinds[0]
     params: dict[str, Any] = {"kind": kind}
     for name in kind_params(kind) + (("lambda_h",) if space.lambda_h is not None else ()):
         bounds = space.lambda_h if name == "lambda_h" else space_bounds(space, kind, name)
-        params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)
+        if name != "lambda_h" and whole_number(kind, name):  # the type the schedule declares
+            params[name] = trial.suggest_int(name, math.ceil(bounds.low), math.floor(bounds.high), log=bounds.log)
+        else:
+            params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)
     return params
 
 
@@ -149,10 +155,16 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
     except KeyboardInterrupt:
         trial.set_user_attr("interrupted", True)
         raise
+    except RunLockedError as err:  # another worker trains this run (the same parameters): not this trial's to do
+        trial.set_user_attr(SKIPPED_ATTR, one_line(err))
+        raise optuna.TrialPruned(f"skipped: {one_line(err)}") from None
     except ConfigError as err:  # the run layer refused the run (memory, device, a damaged checkpoint): stop
         trial.set_user_attr("refused", str(err))
         trial.study.stop()
         if refusals is not None:
             refusals.append(str(err))
         return float("nan")  # Optuna records the trial FAIL in one warning line
+    except Exception as err:
+        trial.set_user_attr(ERROR_ATTR, one_line(f"{type(err).__name__}: {err}"))  # the command names the first
+        raise
     return progress.value()
