@@ -5,15 +5,19 @@ epoch (10 cycles, 20 test episodes) and ``--epochs`` epochs (default 8: ~45 s pe
 into fresh temporary folders, first with ``hydra.launcher.n_jobs=1`` then with ``n_jobs=2``,
 and prints the two times and their ratio. Also printed: the start-up costs that do not
 shrink with more jobs (the sweep command composing and checking its runs; each worker
-process importing torch and MuJoCo), which short runs cannot amortise. Run it on an
+process importing torch and MuJoCo), which short runs cannot amortise; and the dry run of the
+300-run beta grid (``+grid=beta --dry-run``: every run composed and checked, nothing trained)
+in wall-clock and CPU seconds (the CPU time is what an idle core would take). Run it on an
 otherwise idle machine.
 
-Usage: python benchmarks/bench_sweep.py [--epochs 8]
+Usage: python benchmarks/bench_sweep.py [--epochs 8] [--plan-only]
+(``--plan-only``: the beta grid's dry run alone, without the two sweeps.)
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import subprocess
 import sys
 import tempfile
@@ -21,13 +25,22 @@ import time
 
 
 SWEEP = ["-c", "from sweeps.launch import main; main()", "+grid=smoke"]
+PLAN_BETA = ["-c", "from sweeps.launch import main; main()", "+grid=beta", "--dry-run"]
 
 
 def python_seconds(args: list[str]) -> float:
     """Wall-clock seconds of ``python <args>`` in a fresh interpreter."""
+    return python_wall_and_cpu(args)[0]
+
+
+def python_wall_and_cpu(args: list[str]) -> tuple[float, float]:
+    """(wall-clock, CPU) seconds of ``python <args>`` in a fresh interpreter (CPU: its user + system time)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     tic = time.perf_counter()
     subprocess.run([sys.executable, *args], check=True, capture_output=True)
-    return time.perf_counter() - tic
+    wall = time.perf_counter() - tic
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def sweep_seconds(n_jobs: int, epochs: int) -> float:
@@ -39,7 +52,13 @@ def sweep_seconds(n_jobs: int, epochs: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--epochs", type=int, default=8)
+    parser.add_argument("--plan-only", action="store_true", help="only the beta grid's dry run")
     args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as results:
+        wall, cpu = python_wall_and_cpu([*PLAN_BETA, f"results_dir={results}"])
+    print(f"planning the 300-run beta grid (--dry-run): {wall:.1f} s wall-clock, {cpu:.1f} s CPU")
+    if args.plan_only:
+        return
     one = sweep_seconds(1, args.epochs)
     two = sweep_seconds(2, args.epochs)
     with tempfile.TemporaryDirectory() as results:

@@ -9,14 +9,21 @@ when a Hydra release changes them; hydra-core is pinned in pyproject.toml).
   (``BasicSweeper._parse_config``), which the sweeper joins with the command line's.
 - :func:`job_error`: the exception of a failed job (``JobReturn._return_value``; the public
   ``return_value`` re-raises it instead).
+- :func:`group_test` and :func:`apply_value_overrides`: how Hydra's composition tells a group
+  override (``task=push``) from a value override (``seed=0``), in the sweep's search path
+  (``ConfigLoaderImpl._parse_overrides_and_create_caching_repo``), and how it applies the
+  latter to a composed config (``ConfigLoaderImpl._apply_overrides_to_config``): the sweep
+  plans its runs with them (:class:`sweeps.plan.JobConfigs`).
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import Any, Callable
 
+from hydra.core.override_parser.types import Override
 from hydra.core.utils import JobReturn
+from omegaconf import DictConfig, OmegaConf
 
 
 def basic_sweeper_class() -> type:
@@ -32,3 +39,19 @@ def grid_overrides(sweeper: Any) -> list[str]:
 def job_error(result: JobReturn) -> Any:
     """What a failed job raised (its exception object)."""
     return result._return_value
+
+
+def group_test(config_loader: Any, config: DictConfig) -> Callable[[str], bool]:
+    """Whether a name (``task``, ``schedule.beta1``) is a config group in the search path of the
+    sweep's ``config`` (its ``hydra.searchpath`` included), as Hydra's defaults list decides it."""
+    hydra_overrides = OmegaConf.to_container(config.hydra.overrides.hydra)
+    _, repository = config_loader._parse_overrides_and_create_caching_repo(config.hydra.job.config_name,
+                                                                           hydra_overrides)
+    return repository.group_exists
+
+
+def apply_value_overrides(overrides: list[Override], cfg: DictConfig) -> None:
+    """Apply parsed value overrides (``seed=0``, ``+key=v``, ``~key``) to a composed config, in place."""
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+
+    ConfigLoaderImpl._apply_overrides_to_config(overrides, cfg)

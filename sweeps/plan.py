@@ -14,10 +14,19 @@ Runs go **seed by seed**: within a stage every arm's first seed comes before any
 their order, within each seed). Launched one per core in that order, a sweep stopped at any
 point leaves every arm with seeds in equal number (one apart at most), not a few arms complete
 and the rest missing. A run named twice is planned once, where it first appears.
+
+``seeds=N`` sweeps ``seed`` over 0..N-1 in every grid that sets no ``seed`` of its own, unless
+the command line sets ``seed``: ``hersd-sweep task=reach seeds=3`` is three runs.
+
+Every run is composed and checked before any starts. Hydra composes a config per distinct set
+of group choices (``task=push``, ``schedule=linear``); a run's other overrides (``seed=0``,
+``schedule.beta1=0.25``) are applied to a copy of it as Hydra applies them (:class:`JobConfigs`):
+the 300 runs of ``+grid=beta`` need 3 compositions, not 300.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -28,12 +37,12 @@ from hersd.compose import open_schedule, register_schema, register_train_schema
 from hersd.config import ConfigError, TrainConfig, to_train_config
 from hersd.resources import available_cores
 from hersd.runstore import run_dir
-from sweeps.hydra_private import basic_sweeper_class, grid_overrides
+from sweeps.hydra_private import apply_value_overrides, basic_sweeper_class, group_test, grid_overrides
 
 
 @dataclass
 class SweepConfig(TrainConfig):
-    seeds: int = 5  # grids sweep ``seed`` over range(seeds)
+    seeds: int = 5  # a sweep that sets no ``seed`` sweeps it over range(seeds)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -69,8 +78,8 @@ OmegaConf.register_new_resolver("hersd_cores", available_cores, replace=True)
 
 def job_train_config(cfg: DictConfig) -> TrainConfig:
     """A composed sweep job config (with or without its ``hydra`` node) -> its TrainConfig."""
-    cfg = cfg.copy()
     if "hydra" in cfg:
+        cfg = cfg.copy()
         with open_dict(cfg):
             del cfg["hydra"]
     sweep_cfg = to_train_config(cfg)
@@ -115,21 +124,67 @@ def expand(grid: dict[str, str], arguments: list[str], parser: Any) -> list[list
     return [list(job) for batch in sweeper.split_arguments(overrides, None) for job in batch]
 
 
+def with_seeds(grid: dict[str, str], arguments: list[str], seeds: int) -> dict[str, str]:
+    """The grid, sweeping ``seed`` over range(seeds) unless it or the command line sets ``seed``."""
+    if seed_of(arguments) is not None or any(key.lstrip("+~") == "seed" for key in grid):
+        return grid
+    return {**grid, "seed": f"range({seeds})"}
+
+
+class JobConfigs:
+    """Each job's composed config (without its ``hydra`` node), equal to the one Hydra composes for
+    it (``load_sweep_config``) at a fraction of the cost: Hydra composes once per distinct set of
+    group overrides (and hydra.* ones); the job's value overrides are applied to a copy of that."""
+
+    def __init__(self, sweeper: Any, parser: Any) -> None:
+        self.loader = sweeper.hydra_context.config_loader
+        self.sweep_config = sweeper.config
+        self.parser = parser
+        self.is_group = group_test(self.loader, sweeper.config)
+        self.parsed: dict[str, tuple[Any, bool]] = {}  # override -> (Hydra's parse, a value override?)
+        self.composed: dict[tuple[str, ...], DictConfig] = {}
+
+    def parse(self, line: str) -> tuple[Any, bool]:
+        """An override -> (Hydra's parse of it, whether it is a value override), as Hydra's defaults
+        list tells them apart (its ``Overrides``); parsed once, as jobs share most of theirs."""
+        if line not in self.parsed:
+            override = self.parser.parse_overrides([line])[0]
+            is_value = isinstance(override.value(), dict) or not self.is_group(override.key_or_group)
+            self.parsed[line] = override, is_value and not override.is_hydra_override()
+        return self.parsed[line]
+
+    def config(self, job: list[str]) -> DictConfig:
+        """The job's config, as :func:`job_train_config` reads it."""
+        parsed = [self.parse(line) for line in job]
+        values = [override for override, is_value in parsed if is_value]
+        choices = [override for override, is_value in parsed if not is_value]
+        key = tuple(override.input_line for override in choices)
+        if key not in self.composed:
+            composed = self.loader.load_sweep_config(self.sweep_config, list(key))
+            with open_dict(composed):
+                del composed["hydra"]
+            self.composed[key] = composed
+        cfg = copy.deepcopy(self.composed[key])
+        apply_value_overrides(values, cfg)
+        return cfg
+
+
 def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
     """The sweep's runs, composed and checked, in launch order: stage by stage, seed by seed
     -> run dir -> its job. An invalid run config stops the sweep (SweepError, exit code 2)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
+    seeds = int(sweeper.config.seeds)
     jobs = [job for stage in grid_stages(sweeper.grid)
-            for job in seed_by_seed([expand(grid, arguments, parser) for grid in stage])]
+            for job in seed_by_seed([expand(with_seeds(grid, arguments, seeds), arguments, parser) for grid in stage])]
     if not jobs:
         raise SweepError("the sweep expands to no runs; give each swept key at least one value", exit_code=2)
+    configs = JobConfigs(sweeper, parser)
     planned: dict[Path, PlannedRun] = {}
     for job in jobs:
-        job_cfg = sweeper.hydra_context.config_loader.load_sweep_config(sweeper.config, job)
         try:
-            train_cfg = job_train_config(job_cfg)
+            train_cfg = job_train_config(configs.config(job))
             planned.setdefault(run_dir(train_cfg), PlannedRun(job, train_cfg.epochs))
         except ConfigError as err:
             raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None

@@ -86,3 +86,54 @@ def test_the_decay_or_mean_campaign_finishes_the_exponential_then_takes_turns_wi
     shared = {Path(directory).relative_to(tmp_path) for _, directory in
               listed("+grid=pnp_push_paper", f"results_dir={tmp_path}")}
     assert sum(run in shared for run in runs) == 10
+
+
+@pytest.mark.parametrize("args, seeds", [
+    (["task=reach", "epochs=1", "seeds=3"], [0, 1, 2]),  # no grid: seeds=N is N runs
+    (["task=reach", "seeds=3", "schedule=linear", "schedule.beta1=0.5,0.7"], [0, 0, 1, 1, 2, 2]),  # seed by seed
+    (["task=reach", "seeds=3", "seed=4"], [4]),  # the command's seed wins
+    (["+grid=smoke", "seeds=3", "seed=1,2"], [1, 1, 2, 2]),
+])
+def test_seeds_sweeps_seed_unless_the_command_sets_it(tmp_path, args, seeds):
+    runs = [Path(directory) for _, directory in listed(*args, f"results_dir={tmp_path}")]
+    assert [int(run.name.split("-")[0].removeprefix("seed")) for run in runs] == seeds
+
+
+CHECKED_SWEEP = """
+from hersd.config import config_record
+from sweeps import plan
+from sweeps.launch import main
+
+planned = plan.JobConfigs.config
+
+
+def checked(self, job):
+    cfg = planned(self, job)
+    hydras = plan.job_train_config(self.loader.load_sweep_config(self.sweep_config, job))
+    assert config_record(plan.job_train_config(cfg)) == config_record(hydras), job
+    print("checked:", *job)
+    return cfg
+
+
+plan.JobConfigs.config = checked
+main()
+"""
+
+
+@pytest.mark.parametrize("args", [
+    ["+grid=beta", "task=slide", "seeds=1", "schedule.beta1=0.25,1.0"],
+    ["+grid=paper", "task=push", "seeds=1", "schedule=constant,paper_linear_050,paper_exp_025"],
+    ["+grid=iso_mu", "task=pick_and_place", "seeds=1", "schedule.mean_rate=0.85"],
+    ["+grid=pnp_push_paper"],
+    ["+grid=push_paper_campaign"],
+    ["task=reach", "seeds=2", "learner=td3,sac", "ddpg.batch_size=64", "hydra/launcher=submitit_local"],
+])
+def test_each_planned_config_is_the_one_hydra_composes_for_the_job(tmp_path, args):
+    """The planner composes once per set of group choices and applies each job's values to a copy
+    (sweeps.plan.JobConfigs): every job's config equals Hydra's own composition of it."""
+    done = subprocess.run([sys.executable, "-c", CHECKED_SWEEP, *args, f"results_dir={tmp_path}", "--dry-run"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    checked = [line for line in done.stdout.splitlines() if line.startswith("checked:")]
+    listed_count = int(done.stdout.split("sweep: ", 1)[1].split(" runs", 1)[0])
+    assert len(checked) >= listed_count >= 2
