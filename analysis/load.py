@@ -9,8 +9,10 @@ when there are many: :func:`start_reading`) into a :class:`RunTable`:
 - ``sessions``: one row per run x training session: its commit, machine, threads, times
   (:func:`analysis.provenance.session_table`).
 
-A run's *configuration* label (column ``config``) names what its seeds have in common, so
-seeds are grouped by ``(task, config)``; see :func:`config_label`. Runs that share a label
+A run's *configuration* label (column ``config``) names what its seeds have in common, so seeds are
+grouped by ``(task, config)``; see :func:`config_label`. A label's runs share their number of epochs K:
+where the loaded runs of one label differ in K, K is appended but for the paper's (``HER`` at K = 200,
+``HER K=4``), so runs of different K are never pooled, across tasks neither. Runs that share a label
 but not their identity less the seed (:func:`hersd.runstore.run_identity`, the run store's
 own rule) are told apart by the settings that differ.
 """
@@ -27,7 +29,8 @@ import pandas as pd
 
 from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
-from hersd.config import AlgoConfig
+from hersd.config import AlgoConfig, TrainConfig
+from hersd.errors import ConfigError
 from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
 from hersd.runstore import HASHED_UNLESS, run_identity
 from hersd.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
@@ -64,6 +67,7 @@ RUN_COLUMNS = (
 HER_EPS = Constant().eps
 HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
 ARCHER_WEIGHTS = (1.0, 0.5)
+PAPER_EPOCHS = TrainConfig().epochs  # K of the paper's runs (the default): the one K a label leaves unsaid
 PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
 READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
 
@@ -80,16 +84,26 @@ class RunTable:
     epochs: pd.DataFrame
     skipped: list[str] = field(default_factory=list)
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
+    missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
 
 
-def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg") -> str:
+class MissingSchedule(NamedTuple):
+    """A log whose schedule class cannot be imported here (a user's module not on PYTHONPATH): its path
+    (relative to the loaded folder) and the error naming the class."""
+
+    path: str
+    error: str
+
+
+def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg",
+                 epochs: int = PAPER_EPOCHS) -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
-    than the paper's DDPG lead the label).
+    than the paper's DDPG lead the label), ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
 
     Constant-rate schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
     appended when eps != HER_EPS; others are named by their label (:meth:`Schedule.label`); other
-    reward weights are appended as ``λr=`` / ``λh=``.
+    reward weights are appended as ``λr=`` / ``λh=``, then K as ``K=``: runs of different K never share a label.
     """
     if schedule.constant_rate:
         eps = schedule.rate(1, 1)
@@ -103,16 +117,20 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
         qualifiers.append(f"λr={lambda_r:g}")
     if lambda_h != HER_WEIGHTS[1]:
         qualifiers.append(f"λh={lambda_h:g}")
+    if epochs != PAPER_EPOCHS:
+        qualifiers.append(f"K={epochs}")
     prefix = [] if learner == "ddpg" else [learner.upper()]
     return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
 
 
 def _config_order(run: dict[str, Any]) -> tuple:
     """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success and
-    the other kinds (hersd.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2."""
+    the other kinds (hersd.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
+    K."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
     return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
-            run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"])
+            run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"],
+            run["total_epochs"])
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -200,15 +218,18 @@ def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:
             for name, (kind, _) in EPOCH_FIELDS.items()}
 
 
-def read_log(path: Path, folder: Path) -> ReadLog | str:
-    """One log -> :class:`ReadLog`, or the line saying why it was skipped (``"<path>: <reason>"``,
-    the path relative to ``folder``). A damaged log gives the epochs written before the damage."""
+def read_log(path: Path, folder: Path) -> ReadLog | MissingSchedule | str:
+    """One log -> :class:`ReadLog`, :class:`MissingSchedule` when its schedule class cannot be imported, or the
+    line saying why it was skipped (``"<path>: <reason>"``, the path relative to ``folder``). A damaged log
+    gives the epochs written before the damage."""
     shown = path.relative_to(folder).as_posix()
     try:
         log = read_records(path)
         row, settings = _run_row(log.meta)
     except RunLogError as err:
         return f"{shown}: {str(err).removeprefix(f'{path}: ')}"
+    except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
+        return MissingSchedule(shown, str(err))
     except (KeyError, TypeError, ValueError) as err:
         return f"{shown}: run metadata lacks or mistypes a config field ({err})"
     row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
@@ -233,7 +254,7 @@ class LogReading:
         self._batches = [paths[i::READ_BATCHES] for i in range(READ_BATCHES)] if parallel else [paths]
         self._reading = ForkedMap(self._read_batch, self._batches)
 
-    def _read_batch(self, paths: list[Path]) -> list[ReadLog | str]:
+    def _read_batch(self, paths: list[Path]) -> list[ReadLog | MissingSchedule | str]:
         return [read_log(path, self.folder) for path in paths]
 
     def result(self, tasks: Iterable[str] | None = None, algos: Iterable[str] | None = None) -> RunTable:
@@ -242,8 +263,10 @@ class LogReading:
                    for path, log in zip(batch, logs)}
         logs = [by_path[path] for path in self.paths]
         readable = [log for log in logs if isinstance(log, ReadLog)]
+        missing = missing_schedule_lines([log for log in logs if isinstance(log, MissingSchedule)])
         if not readable:
-            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable")
+            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable"
+                                   + "".join(f"; {line}" for line in missing))
         kept = [log for log in readable
                 if (tasks is None or log.row["task"] in tasks) and (algos is None or log.row["algo"] in algos)]
         if not kept:
@@ -251,7 +274,21 @@ class LogReading:
             found_algos = sorted({log.row["algo"] for log in readable})
             raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
                                    f"algos present: {', '.join(found_algos)})")
-        return _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
+        table = _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
+        table.missing_schedules = missing
+        return table
+
+
+def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:
+    """One line per schedule class that cannot be imported (its error, naming the class), with the logs it
+    keeps out and the fix."""
+    paths: dict[str, list[str]] = {}
+    for log in missing:
+        paths.setdefault(log.error, []).append(log.path)
+    return [f"{error.removesuffix('; is its module on PYTHONPATH?')}: {len(shown)} run log"
+            f"{'' if len(shown) == 1 else 's'} skipped ({shown[0]}{' and others' if len(shown) > 1 else ''}); "
+            "put the folder holding the class's module on PYTHONPATH (PYTHONPATH=<folder> hersd-report ...) to "
+            "read them" for error, shown in paths.items()]
 
 
 def start_reading(folder: str | Path) -> LogReading:
@@ -282,10 +319,19 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
 def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     """The runs and epochs tables of readable logs: labels told apart, configs ordered."""
     rows = [dict(log.row) for log in logs]
-    labels = [config_label(schedule_from_record(json.loads(r["schedule_record"])), r["lambda_r"], r["lambda_h"],
-                           r["mep"], r["learner"]) for r in rows]
+    schedules = [schedule_from_record(json.loads(row["schedule_record"])) for row in rows]
+
+    def label(row: dict[str, Any], schedule: Schedule, epochs: int = PAPER_EPOCHS) -> str:
+        return config_label(schedule, row["lambda_r"], row["lambda_h"], row["mep"], row["learner"], epochs)
+
+    labels = [label(row, schedule) for row, schedule in zip(rows, schedules)]
+    epochs_of: dict[str, set[int]] = {}
+    for row, name in zip(rows, labels):
+        epochs_of.setdefault(name, set()).add(row["total_epochs"])
+    labels = [label(row, schedule, row["total_epochs"]) if len(epochs_of[name]) > 1 else name
+              for row, schedule, name in zip(rows, schedules, labels)]
     # Within a task, seeds of one label must share every setting; where they do not, say what
-    # differs. Across tasks a label may differ in budget (epochs, cycles): tasks are strata.
+    # differs. Across tasks a label (K included) may differ in budget per epoch (cycles): tasks are strata.
     groups = [(row["task"], label) for row, label in zip(rows, labels)]
     labels = _distinguish(labels, [log.settings for log in logs], groups)
     for row, label in zip(rows, labels):

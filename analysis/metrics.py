@@ -40,7 +40,7 @@ SHARE_COLUMNS = ("share_real_success", "share_real_failure", "share_hindsight")
 PAPER_COMPOSITION_TASK = "push"
 PAPER_COMPOSITION_EPOCH = 150
 PAPER_COMPOSITION = {"share_real_success": 0.053, "share_hindsight": 0.80, "share_real_failure": 0.147}
-SUMMARY_COLUMNS = ["task", "config", "seeds", "in_progress", "mu_eps", "final_median", "auc",
+SUMMARY_COLUMNS = ["task", "config", "total_epochs", "seeds", "in_progress", "mu_eps", "final_median", "auc",
                    *(f"epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS),
                    *(f"raw_epochs_to_{threshold:g}" for threshold in SUCCESS_THRESHOLDS), "iqm", "iqm_low", "iqm_high",
                    f"p_improve_{BASELINE}"]
@@ -270,55 +270,68 @@ def her_baselines(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
 
 
 def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
-    """One row per (task, config) with complete runs; only they enter it.
+    """One row per (task, config) of the run table; only complete runs enter its statistics.
 
     ``curves``: :func:`smoothed_curves` of the complete runs; ``runs``: the run table (every run).
-    Columns: task, config, seeds (complete runs), in_progress (its runs left out, not
-    complete), mu_eps (the mean rate: the run table's, the median over seeds for an adaptive schedule), final_median (median over seeds of final success), auc (mean over epochs 1..K
+    Columns: task, config, total_epochs (K: one per config, its label says it), seeds (complete runs),
+    in_progress (its runs left out, not complete), mu_eps (the mean rate: the run table's, the median over seeds
+    for an adaptive schedule; a configuration without complete runs: its fixed schedule's eq. 10, NaN if adaptive),
+    final_median (median over seeds of final success), auc (mean over epochs 1..K
     of the median curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve
     reaches it, NaN if never), raw_epochs_to_0.5 / raw_epochs_to_0.9 (the same for the median
     of the raw, unsmoothed success), iqm, iqm_low, iqm_high (IQM of final success and its bootstrap
     interval), p_improve_HER (probability of improvement on the seeds of its
-    :func:`her_baselines` HER configuration; NaN without one).
+    :func:`her_baselines` HER configuration; NaN without one). A configuration whose runs are all in
+    progress has seeds 0 and these statistics empty.
     """
     baselines = her_baselines(runs[runs["complete"]])
     finals, grids = {}, {}
     for key, group in final_success(curves).groupby(GROUP, observed=True):
         finals[key] = group["final"].to_numpy()
         grids[key] = common_grid(group["final_grid"])
-    in_progress = (~runs["complete"]).groupby([runs["task"], runs["config"]], observed=True).sum()
-    mean_rates = runs[runs["complete"]].groupby(GROUP, observed=True)["mu_eps"].median()
+    medians = dict(list(median_curves(curves).groupby(GROUP, observed=True)))
+    configs = runs.groupby(GROUP, observed=True).agg(
+        total_epochs=("total_epochs", "first"), in_progress=("complete", lambda done: int((~done).sum())),
+        adaptive=("adaptive", "first"), mu_eps_any=("mu_eps", "median"))
+    configs["mu_eps"] = runs[runs["complete"]].groupby(GROUP, observed=True)["mu_eps"].median()
+    configs["mu_eps"] = configs["mu_eps"].fillna(configs["mu_eps_any"].where(~configs["adaptive"].astype(bool)))
     rows = []
-    for (task, config), median in median_curves(curves).groupby(GROUP, observed=True, sort=True):
-        final = finals[(task, config)]
-        low, high = iqm_interval([final], seed=seed)
-        row = {
-            "task": task, "config": config, "seeds": len(final), "in_progress": int(in_progress[(task, config)]),
-            "mu_eps": float(mean_rates[(task, config)]),
-            "final_median": grid_median(final, grids[(task, config)]),
-            "auc": grid_mean(median["median"].to_numpy(), median["median_grid"].to_numpy()),
-        }
-        for threshold in SUCCESS_THRESHOLDS:
-            for prefix, column in (("", "median"), ("raw_", "raw_median")):
-                row[f"{prefix}epochs_to_{threshold:g}"] = first_epoch_reaching(
-                    median["epoch"].to_numpy(), median[column].to_numpy(), threshold)
-        row.update(iqm=interquartile_mean(final, grids[(task, config)]), iqm_low=low, iqm_high=high)
-        baseline = baselines.get((task, config))
-        row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
-                                        if (task, baseline) in finals else float("nan"))
+    for (task, config), setup in configs.iterrows():
+        row = {"task": task, "config": config, "total_epochs": int(setup["total_epochs"]), "seeds": 0,
+               "in_progress": int(setup["in_progress"]), "mu_eps": float(setup["mu_eps"])}
+        if (task, config) in finals:
+            final, grid = finals[(task, config)], grids[(task, config)]
+            row.update(_complete_statistics(final, grid, medians[(task, config)], seed))
+            baseline = baselines.get((task, config))
+            row[f"p_improve_{BASELINE}"] = (probability_of_improvement(final, finals[(task, baseline)])
+                                            if (task, baseline) in finals else float("nan"))
         rows.append(row)
     table = pd.DataFrame.from_records(rows, columns=SUMMARY_COLUMNS)
     for column in [c for c in SUMMARY_COLUMNS if "epochs_to_" in c]:
         table[column] = table[column].astype("Int64")  # empty when never
-    table["config"] = pd.Categorical(table["config"], categories=curves["config"].cat.categories, ordered=True)
+    table["config"] = pd.Categorical(table["config"], categories=runs["config"].cat.categories, ordered=True)
     table["task_rank"] = table["task"].map(task_rank)
     return table.sort_values(["task_rank", "config"]).drop(columns="task_rank").reset_index(drop=True)
 
 
-def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
-    """One row per config, across the tasks it was run on.
+def _complete_statistics(final: np.ndarray, grid: float, median: pd.DataFrame, seed: int) -> dict:
+    """A summary row's statistics of one configuration's complete seeds: ``final`` their final successes (shape
+    (seeds,), on the grid 1/``grid``), ``median`` its :func:`median_curves` rows."""
+    low, high = iqm_interval([final], seed=seed)
+    row = {"seeds": len(final), "final_median": grid_median(final, grid),
+           "auc": grid_mean(median["median"].to_numpy(), median["median_grid"].to_numpy())}
+    for threshold in SUCCESS_THRESHOLDS:
+        for prefix, column in (("", "median"), ("raw_", "raw_median")):
+            row[f"{prefix}epochs_to_{threshold:g}"] = first_epoch_reaching(
+                median["epoch"].to_numpy(), median[column].to_numpy(), threshold)
+    return row | {"iqm": interquartile_mean(final, grid), "iqm_low": low, "iqm_high": high}
 
-    Columns: config, tasks, seeds, iqm (IQM of the pooled final successes), iqm_low,
+
+def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+    """One row per config, across the tasks it was run on (a config's label names its K: runs of different K are
+    never pooled).
+
+    Columns: config, total_epochs (K), tasks, seeds, iqm (IQM of the pooled final successes), iqm_low,
     iqm_high (bootstrap stratified by task), p_improve_HER (mean over the tasks where the
     config has a :func:`her_baselines` HER configuration of the per-task probability).
     ``curves`` and ``runs`` as for :func:`summary_table`: only complete runs enter.
@@ -327,6 +340,7 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
     finals = final_success(curves)
     per_task = {key: group["final"].to_numpy() for key, group in finals.groupby(GROUP, observed=True)}
     grids = finals.groupby("config", observed=True)["final_grid"].agg(common_grid)
+    epochs = runs.groupby("config", observed=True)["total_epochs"].first()
     rows = []
     for config, group in finals.groupby("config", observed=True, sort=True):
         tasks = list(dict.fromkeys(group["task"]))
@@ -334,10 +348,10 @@ def aggregate_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTST
         low, high = iqm_interval(strata, seed=seed)
         improvements = [probability_of_improvement(per_task[(task, config)], per_task[(task, baselines[(task, config)])])
                         for task in tasks if (task, baselines.get((task, config))) in per_task]
-        rows.append({"config": config, "tasks": len(tasks), "seeds": int(sum(len(s) for s in strata)),
+        rows.append({"config": config, "total_epochs": int(epochs[config]), "tasks": len(tasks), "seeds": int(sum(len(s) for s in strata)),
                      "iqm": interquartile_mean(np.concatenate(strata), grids[config]), "iqm_low": low, "iqm_high": high,
                      f"p_improve_{BASELINE}": float(np.mean(improvements)) if improvements else float("nan")})
-    return pd.DataFrame.from_records(rows, columns=["config", "tasks", "seeds", "iqm", "iqm_low", "iqm_high",
+    return pd.DataFrame.from_records(rows, columns=["config", "total_epochs", "tasks", "seeds", "iqm", "iqm_low", "iqm_high",
                                                     f"p_improve_{BASELINE}"])
 
 

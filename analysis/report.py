@@ -65,9 +65,12 @@ TABLE_NOTES = {
                "(analysis/claims.py): the statistic of both configurations, their seeds, the exact permutation "
                "test and its p (with the smallest p the seed counts allow), and the verdict those numbers support "
                f"at the 5 % level. tables/claims.csv; docs/RESULTS.md opens with the same tables."),
-    "summary": ("One row per task and configuration with complete runs. Only complete runs enter this and every "
+    "summary": ("One row per task and configuration, with its number of epochs K (runs of different K are "
+                "different configurations: their labels say K where the runs differ in it, but for the paper's 200). "
+                "Only complete runs enter this and every "
                 "other table: <b>complete seeds</b> counts them, <b>runs in progress</b> the runs left out (not "
-                "complete: running or stopped; they are drawn on their own in the learning curves). "
+                "complete: running or stopped; they are drawn on their own in the learning curves); a configuration "
+                "whose runs are all in progress has 0 complete seeds and no statistics yet. "
                 "Medians and means of success are exact (each rate is a fraction of the test episodes). "
                 "<b>Test success at epoch K</b>: median over seeds of each seed's test success at its last epoch "
                 "K, smoothed (the moving average of the first line). "
@@ -80,7 +83,7 @@ TABLE_NOTES = {
                 "0.5 P(X = Y) for X a seed's final success and Y a seed's of HER (eps = 0.8, no MEP) with the same "
                 "learner and number of epochs K, over all pairs. Column names of tables/summary.csv: "
                 "docs/ANALYSIS.md."),
-    "aggregate": ("One row per configuration across the tasks it was run on: IQM of all its seeds' final "
+    "aggregate": ("One row per configuration (one K) across the tasks it was run on: IQM of all its seeds' final "
                   "success; the bootstrap resamples seeds within each task (stratified); P(improvement over HER) is "
                   "the mean over tasks of the per-task probability of improvement."),
     "runs": ("Every run, in progress or complete, one table per task and configuration (click to open), with its "
@@ -241,6 +244,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
              f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
              f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
     skipped = [f"log {line}" for line in table.skipped] + [f"study storage {line}" for line in studies.skipped]
+    skipped += table.missing_schedules
     if skipped:
         parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")
@@ -342,7 +346,7 @@ def _runs_html(analysis: Analysis) -> list[str]:
         line = f"{task_title(task)} · {config}: {_count(len(group), 'run')}, {done} complete"
         if len(group) > done:
             line += f", {len(group) - done} in progress"
-        if (task, config) in summary.index:
+        if done:
             row = summary.loc[(task, config)]
             line += (f"; test success at epoch {int(group.loc[group['complete'], 'total_epochs'].max())}, median "
                      f"over the complete seeds {row['final_median']:.3f}")
@@ -431,6 +435,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     table = _load(folder, tasks, algos, timings)
     for line in table.skipped:
         warn(f"warning: skipped unreadable log {line}")
+    for line in table.missing_schedules:
+        warn(f"warning: {line}")
     runs = table.runs
     log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} "
         f"skipped), {_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "

@@ -38,6 +38,7 @@ COLUMNS: dict[str, Column] = {
     "versus": Column("versus configuration"),
     "source": Column("source"),
     "tasks": Column("tasks"),
+    "total_epochs": Column("epochs K"),
     "seeds": Column("complete seeds"),
     "versus_seeds": Column("versus: complete seeds"),
     "in_progress": Column("runs in progress (left out)"),

@@ -52,12 +52,30 @@ def test_the_run_list_names_the_cpu_a_log_records(tmp_path):
                                                                            "old/run.mcap": ""}
 
 
-def test_runs_sharing_a_label_but_not_a_config_are_told_apart(tmp_path):
+def test_runs_sharing_a_label_but_not_their_k_are_labelled_by_k(tmp_path):
     write_run(tmp_path / "a", make_config(epochs=4), np.zeros(4))
     write_run(tmp_path / "b", make_config(epochs=6), np.zeros(6))
     write_run(tmp_path / "c", make_config(seed=1, epochs=6), np.zeros(6))
     labels = load_runs(tmp_path).runs.groupby("config", observed=True)["seed"].apply(list).to_dict()
-    assert labels == {"HER (epochs=4)": [0], "HER (epochs=6)": [0, 1]}
+    assert labels == {"HER K=4": [0], "HER K=6": [0, 1]}
+
+
+def test_the_papers_k_keeps_its_label_beside_other_ks(tmp_path):
+    """HER at K = 200 stays ``HER`` (docs/RESULTS.md and analysis/claims.py quote it) beside HER at K = 4."""
+    write_run(tmp_path / "paper", make_config(epochs=load.PAPER_EPOCHS), np.zeros(3), complete=False)
+    write_run(tmp_path / "smoke", make_config(task="reach", epochs=4), np.zeros(4))
+    runs = load_runs(tmp_path).runs.set_index("path")
+    assert runs["config"].astype(str).to_dict() == {"paper/run.mcap": "HER", "smoke/run.mcap": "HER K=4"}
+
+
+def test_runs_sharing_a_label_and_k_but_not_a_config_are_told_apart(tmp_path):
+    write_run(tmp_path / "a", make_config(), np.zeros(6))
+    other = make_config(seed=1)
+    other.task.cycles_per_epoch += 1
+    write_run(tmp_path / "b", other, np.zeros(6))
+    labels = set(load_runs(tmp_path).runs["config"])
+    assert labels == {f"HER (task.cycles_per_epoch={n})" for n in (other.task.cycles_per_epoch - 1,
+                                                                    other.task.cycles_per_epoch)}
 
 
 def test_a_log_made_before_fields_existed_shares_the_configuration_of_new_logs(tmp_path):
@@ -78,13 +96,14 @@ def test_a_log_made_before_fields_existed_shares_the_configuration_of_new_logs(t
     assert list(load_runs(tmp_path).runs["config"]) == ["HER", "HER"]
 
 
-def test_a_label_spans_tasks_with_different_budgets_and_lookalikes_get_distinct_styles(tmp_path):
+def test_a_label_spans_tasks_at_one_k_only_and_lookalikes_get_distinct_styles(tmp_path):
     write_run(tmp_path / "reach", make_config(task="reach", epochs=4), np.zeros(4))
     write_run(tmp_path / "push20", make_config(epochs=20), np.zeros(20))
     write_run(tmp_path / "push30", make_config(epochs=30), np.zeros(30))
     table = load_runs(tmp_path)
     labels = table.runs.groupby(["task", "config"], observed=True)["run"].count().to_dict()
-    assert labels == {("reach", "HER"): 1, ("push", "HER (epochs=20)"): 1, ("push", "HER (epochs=30)"): 1}
+    assert labels == {("reach", "HER K=4"): 1, ("push", "HER K=20"): 1, ("push", "HER K=30"): 1}
+    assert metrics.analyse(table.runs, table.epochs, WINDOW).aggregate["total_epochs"].tolist() == [4, 20, 30]
     styles = config_styles(metrics.analyse(table.runs, table.epochs, WINDOW))
     looks = {(style["color"], str(style["linestyle"])) for style in styles.values()}
     assert len(looks) == len(styles) == 3
@@ -160,3 +179,21 @@ def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch):
     forked = load_runs(sweep)
     pd.testing.assert_frame_equal(forked.runs, here.runs)
     pd.testing.assert_frame_equal(forked.epochs, here.epochs)
+
+
+def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp_path, capsys):
+    """Two runs of a user's schedule class whose module is not on PYTHONPATH beside a HER run: one warning line
+    naming the class and the fix, not one "lacks or mistypes a config field" per run."""
+    write_run(tmp_path / "her", make_config(), np.zeros(6))
+    record = config_record(make_config())
+    record["schedule"] = {"kind": "users_own_steps.Step", "k0": 3}
+    for seed in (0, 1):
+        write_run(tmp_path / f"step{seed}", make_config(seed=seed), np.zeros(6),
+                  meta={"config": {**record, "seed": seed}})
+    table = load_runs(tmp_path)
+    assert len(table.runs) == 1 and not table.skipped and len(table.missing_schedules) == 1
+    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("warning: schedule class users_own_steps.Step cannot be imported")
+    assert "2 run logs skipped (step0/run.mcap and others)" in line and "on PYTHONPATH" in line
+    assert "lacks or mistypes" not in line

@@ -77,14 +77,19 @@ def test_runs_in_progress_enter_no_statistic(tmp_path):
     assert set(midway.curves.loc[~midway.curves["complete"], "config"]) == {"HER", "linear b1=0.5",
                                                                           "exp b1=0.5 b2=0.5"}
     summary = midway.summary.set_index("config")
-    assert list(summary.index) == ["HER", "linear b1=0.5"]  # exp has no complete run: no row
-    assert summary["seeds"].tolist() == [2, 2] and summary["in_progress"].tolist() == [1, 1]
+    assert list(summary.index) == ["HER", "linear b1=0.5", "exp b1=0.5 b2=0.5"]  # exp: its runs all in progress
+    assert summary["seeds"].tolist() == [2, 2, 0] and summary["in_progress"].tolist() == [1, 1, 1]
+    exp = summary.loc["exp b1=0.5 b2=0.5"]  # its row says it runs, its statistics are empty
+    assert exp["total_epochs"] == 6 and exp[metrics.SUMMARY_COLUMNS[6:]].isna().all()
+    assert exp["mu_eps"] == pytest.approx(midway.runs.loc[midway.runs["config"] == "exp b1=0.5 b2=0.5", "mu_eps"].iloc[0])
     assert summary.loc["HER", "final_median"] == pytest.approx((0.8 + 2.6 / 3) / 2)  # seeds 0 and 1 at epoch 6
     assert summary.loc["linear b1=0.5", "p_improve_HER"] == pytest.approx(2 / 4)  # 0.95 beats both, 0.2 neither
     assert list(midway.aggregate["config"]) == ["HER", "linear b1=0.5"]
     assert midway.tests[["config", "versus", "seeds", "versus_seeds"]].values.tolist() == [
         ["HER", "linear b1=0.5", 2, 2], ["linear b1=0.5", "HER", 2, 2]]
-    for name in ("summary", "aggregate", "medians", "shares", "q_means", "tests"):
+    with_complete = midway.summary[midway.summary["seeds"] > 0]
+    pd.testing.assert_frame_equal(_comparable(with_complete), _comparable(alone.summary))
+    for name in ("aggregate", "medians", "shares", "q_means", "tests"):
         pd.testing.assert_frame_equal(_comparable(getattr(midway, name)), _comparable(getattr(alone, name)))
     assert (midway.medians["n_seeds"] == 2).all()
 
@@ -164,7 +169,7 @@ def test_aggregate_pools_tasks(analysed):
 
 
 def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
-    """A folder holding HER at K = 6 and K = 8 (labels "HER (epochs=6)", "HER (epochs=8)") and TD3
+    """A folder holding HER at K = 6 and K = 8 (labels "HER K=6", "HER K=8") and TD3
     runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""
     from hersd.config import LearnerConfig
 
@@ -183,7 +188,7 @@ def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_
     p_improve = analysis.summary.set_index("config")["p_improve_HER"]
     assert p_improve["linear b1=0.5"] == 1.0  # 0.8 beats HER at K = 6 (0.4), not HER at K = 8 (1.0)
     assert p_improve["TD3 linear b1=0.5"] == 0.0  # TD3's HER (1.0), not DDPG's
-    assert p_improve["HER (epochs=8)"] == 0.5 and p_improve["TD3 HER"] == 0.5
+    assert p_improve["HER K=8"] == 0.5 and p_improve["TD3 HER"] == 0.5
     assert analysis.aggregate.set_index("config")["p_improve_HER"]["linear b1=0.5"] == 1.0
 
 
@@ -275,11 +280,11 @@ def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and
         write_run(tmp_path / f"her8-{seed}", make_config(seed=seed, epochs=8), np.full(8, 1.0))
     write_run(tmp_path / "linear8", make_config(schedule=linear, epochs=8), np.full(8, 0.9))
     tests = metrics.analyse(*_tables(tmp_path), WINDOW).tests.set_index(["config", "versus"])
-    assert list(tests.index) == [("HER (epochs=6)", "linear b1=0.5 (epochs=6)"),
-                                 ("linear b1=0.5 (epochs=6)", "HER (epochs=6)")]
+    assert list(tests.index) == [("HER K=6", "linear b1=0.5 K=6"),
+                                 ("linear b1=0.5 K=6", "HER K=6")]
     # 0.9, 0.9 against 0.2, 0.3: of the 6 splits only the observed one is as favourable.
-    assert tests.loc[("linear b1=0.5 (epochs=6)", "HER (epochs=6)"), "p_final"] == pytest.approx(1 / 6)
-    assert tests.loc[("HER (epochs=6)", "linear b1=0.5 (epochs=6)"), "p_final"] == pytest.approx(1.0)
+    assert tests.loc[("linear b1=0.5 K=6", "HER K=6"), "p_final"] == pytest.approx(1 / 6)
+    assert tests.loc[("HER K=6", "linear b1=0.5 K=6"), "p_final"] == pytest.approx(1.0)
 
 
 def test_permutation_tests_keep_sides_with_equal_means_tied():
