@@ -38,12 +38,13 @@ SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
 # Saturated, mutually distinct colours for decay schedules (grey and black are the baselines').
 PALETTE = [*colormaps["tab10"].colors[:7], *colormaps["tab10"].colors[8:], *colormaps["Dark2"].colors]
 PANEL_SIZE = (4.4, 3.0)  # inches per panel
-MAX_COLUMNS = 4
+MAX_COLUMNS = 2  # at 100 dpi a figure of two panels and its legend is ~1250-1350 px wide: legible in a 1280-px page
 ALTERNATE_DASHES = [":", (0, (6, 2, 1, 2, 1, 2)), (0, (10, 3))]  # for configs whose usual style is taken
 LEGEND_WIDTH = 2.3  # inches reserved right of the panels for a figure legend, at least
 LEGEND_CHARACTERS = 34  # legend entries are wrapped to lines of at most this many characters
 GLYPH_WIDTH = 0.6  # average width of a DejaVu Sans glyph, in em: how many characters fit a width
 TITLE_SIZE, PANEL_TITLE_SIZE, LEGEND_SIZE = 12, 10, 8  # points
+SMALLEST_FONT = LEGEND_SIZE  # points: no text of a figure is smaller (tests/test_figures.py, test_report_browser.py)
 EPOCH_TICKS = 4  # intervals between epoch ticks, at most
 IN_PROGRESS = " (in progress)"  # appended to a config's legend label for its unfinished runs
 IN_PROGRESS_STYLE = {"linestyle": (0, (3, 2)), "linewidth": 0.8, "alpha": 0.8}  # thin dashes, each run on its own
@@ -257,33 +258,49 @@ def _success_ylabel(window: int) -> str:
 # --- Fig. 1: schedules -------------------------------------------------------------------------------------------
 
 def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
-    """Fig. 1: eps(k) of every schedule of a fixed kind present, one panel per decay kind."""
-    curves = metrics.schedule_curves(analysis.runs)
+    """Fig. 1: eps(k) of every schedule of the runs (:func:`analysis.metrics.schedule_curves`) as a step per
+    epoch, one panel per kind that is not constant, each line its own colour."""
+    curves = metrics.schedule_curves(analysis.runs, analysis.epochs)
     if curves.empty:
         return []
-    caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, per epoch, "
-               "for each schedule of the loaded runs (each kind's own formula: eq. 9 for the paper's decays; several "
-               "configurations may share a schedule). "
+    caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, one step per "
+               "epoch k (drawn over k − 1 to k), for each schedule of the loaded runs, one colour per line: each "
+               "kind's own formula (eq. 9 for the paper's decays), the configurations that share a schedule and K "
+               "named together; a schedule that adapts to the run (the success-driven one) by the rates its runs "
+               "realised, per task (the logs' relabel rate, median over seeds). "
                f"Constant schedules (HER and ARCHER use ε = {HER_EPS:g}) are dashed and drawn in every panel.")
-    return [ReportFigure("schedules", "Relabel-rate schedules (Fig. 1)", caption, partial(_draw_schedules, curves))]
+    colours = _line_colours(curves, config_styles(analysis))
+    return [ReportFigure("schedules", "Relabel-rate schedules (Fig. 1)", caption,
+                         partial(_draw_schedules, curves, colours))]
 
 
-def _draw_schedules(curves: pd.DataFrame) -> Figure:
-    colours = schedule_colours(curves.rename(columns={"eps": "eps_k", "eps_setting": "eps"}))
+def _line_colours(curves: pd.DataFrame, styles: dict[str, dict]) -> dict[str, tuple | str]:
+    """Each line's colour (``curves``: schedule_curves): its first configuration's, or where another line
+    took that, the first PALETTE colour no line has."""
+    colours: dict[str, tuple | str] = {}
+    for line, config in curves[["line", "configs"]].drop_duplicates("line").itertuples(index=False):
+        colour = styles[config]["color"]
+        if colour in colours.values():
+            colour = next((c for c in PALETTE if c not in colours.values()), colour)
+        colours[line] = colour
+    return colours
+
+
+def _draw_schedules(curves: pd.DataFrame, colours: dict[str, tuple | str]) -> Figure:
     kinds = decay_kinds(curves) or list(dict.fromkeys(curves["schedule"]))
-    several_k = curves["total_epochs"].nunique() > 1
-    figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k)")
+    legend_width = _legend_width(colours)
+    figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k)", legend_width=legend_width)
     for axis, kind in zip(axes, kinds):
         shown = curves[curves["constant_rate"].astype(bool) | (curves["schedule"] == kind)]
-        for (label, total_epochs), curve in shown.groupby(["label", "total_epochs"], sort=False):
-            first = curve.iloc[0]
-            axis.plot(curve["epoch"], curve["eps"], color=colours[first["schedule_tag"]], linewidth=1.5,
-                      linestyle="--" if first["constant_rate"] else "-",
-                      label=label + (f" (K={total_epochs})" if several_k else ""))
+        for line, curve in shown.groupby("line", sort=False):
+            epoch = curve["epoch"].to_numpy()
+            axis.stairs(curve["eps"].to_numpy(), edges=[*(epoch - 1), epoch[-1]], baseline=None, color=colours[line],
+                        linewidth=1.5, linestyle="--" if curve["constant_rate"].iloc[0] else "-",
+                        label=_legend_label(line))
         _set_title(axis, kind_title(kind))
         axis.set_ylim(-0.02, 1.02)
-        axis.legend(fontsize=7, loc="lower left")
     _label_outer(axes, "relabel rate ε(k)\n(share of goals relabelled)", xlabel="epoch k")
+    _figure_legend(figure, axes, legend_width)
     return figure
 
 

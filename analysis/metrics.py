@@ -521,27 +521,48 @@ def mean_q(epochs: pd.DataFrame) -> pd.DataFrame:
     return grouped.agg(q_mean="mean", n_seeds="count").reset_index()
 
 
-def schedule_curves(runs: pd.DataFrame) -> pd.DataFrame:
-    """eps(k) for k = 1..K of every distinct schedule that does not adapt (its record, K) among the runs
-    (adaptive schedules depend on each run's progress: their rates are in the logs, not drawn here).
+SCHEDULE_CURVE_COLUMNS = ["line", "configs", "schedule", "constant_rate", "adaptive", "eps_setting", "beta1", "beta2",
+                          "total_epochs", "epoch", "eps"]
 
-    Returns columns label (Schedule.label), schedule (kind), schedule_tag, constant_rate, eps_setting, beta1,
-    beta2, total_epochs, epoch, eps; in the registry's order of kinds, then by beta1, beta2, eps, tag.
+
+def schedule_curves(runs: pd.DataFrame, epochs: pd.DataFrame) -> pd.DataFrame:
+    """The per-epoch rates eps(k), k = 1..K, of every schedule of the runs: one line per distinct schedule and K
+    that does not adapt (its own rates; the configurations sharing it, e.g. HER and ARCHER, share the line), and
+    one per task and configuration whose schedule adapts (the rates its runs realised: the logs' relabel_rate,
+    median over seeds at each epoch they reached).
+
+    ``runs`` / ``epochs``: the tables of :mod:`analysis.load`. Returns columns SCHEDULE_CURVE_COLUMNS: line (its
+    legend label: the configurations' labels, an adaptive line's task added), configs (the first configuration's
+    label: its style), the schedule's kind and settings, total_epochs, epoch, eps; in the registry's order of kinds,
+    then by beta1, beta2, eps, K.
     """
-    settings = ["schedule", "schedule_tag", "schedule_record", "constant_rate", "eps", "beta1", "beta2", "total_epochs"]
-    distinct = runs.loc[~runs["adaptive"].astype(bool), settings].drop_duplicates(["schedule_record", "total_epochs"])
-    distinct = distinct.assign(order=distinct["schedule"].map(schedule_rank))
-    frames = []
-    for run in distinct.sort_values(["order", "beta1", "beta2", "eps", "schedule_tag", "total_epochs"]).itertuples(index=False):
-        schedule = schedule_from_record(json.loads(run.schedule_record))
-        frames.append(pd.DataFrame({
-            "label": schedule.label(), "schedule": run.schedule, "schedule_tag": run.schedule_tag,
-            "constant_rate": run.constant_rate, "eps_setting": run.eps, "beta1": run.beta1, "beta2": run.beta2,
-            "total_epochs": run.total_epochs, "epoch": np.arange(1, run.total_epochs + 1),
-            "eps": schedule.epoch_rates(int(run.total_epochs))}))
-    columns = ["label", "schedule", "schedule_tag", "constant_rate", "eps_setting", "beta1", "beta2", "total_epochs",
-               "epoch", "eps"]
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=columns)
+    fixed, frames = runs[~runs["adaptive"].astype(bool)], []
+    for (record, total), group in fixed.groupby(["schedule_record", "total_epochs"], sort=False):
+        schedule = schedule_from_record(json.loads(record))
+        configs = [str(config) for config in group["config"].drop_duplicates().sort_values()]  # config order
+        frames.append(_schedule_line(group.iloc[0], ", ".join(configs), configs[0], np.arange(1, total + 1),
+                                     schedule.epoch_rates(int(total))))
+    adaptive = epochs[epochs["adaptive"].astype(bool)]
+    for (task, config), group in adaptive.groupby(["task", "config"], observed=True):
+        rates = group.groupby("epoch")["relabel_rate"].median()
+        line = f"{config} on {task} (realised, median over seeds)"
+        frames.append(_schedule_line(group.iloc[0], line, str(config), rates.index.to_numpy(), rates.to_numpy()))
+    if not frames:
+        return pd.DataFrame(columns=SCHEDULE_CURVE_COLUMNS)
+    curves = pd.concat(frames, ignore_index=True)
+    curves["order"] = curves["schedule"].map(schedule_rank)
+    curves = curves.sort_values(["order", "adaptive", "beta1", "beta2", "eps_setting", "total_epochs", "line", "epoch"],
+                                kind="stable")
+    return curves[SCHEDULE_CURVE_COLUMNS].reset_index(drop=True)
+
+
+def _schedule_line(run: pd.Series, line: str, config: str, epoch: np.ndarray, eps: np.ndarray) -> pd.DataFrame:
+    """One line of :func:`schedule_curves`: its rates eps (shape (n,)) at ``epoch`` (shape (n,)), the schedule's
+    settings from ``run`` (a row of the run table)."""
+    return pd.DataFrame({"line": line, "configs": config, "schedule": run["schedule"],
+                         "constant_rate": bool(run["constant_rate"]), "adaptive": bool(run["adaptive"]),
+                         "eps_setting": run["eps"], "beta1": run["beta1"], "beta2": run["beta2"],
+                         "total_epochs": int(run["total_epochs"]), "epoch": epoch, "eps": eps})
 
 
 def mean_rate_outcomes(runs: pd.DataFrame, outcomes: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:

@@ -10,11 +10,16 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from analysis import metrics
+from matplotlib.patches import StepPatch
+from matplotlib.text import Text
+
+from analysis.figures import SMALLEST_FONT, all_figures, kind_title
 from analysis.figures import LEGEND_CHARACTERS, mean_rate_figures, composition_figures, learning_curve_figures, mep_figures, q_figures
 from analysis.load import load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import write_run
 from hersd.config import ScheduleConfig
+from hersd.schedules import Linear
 
 from analysis_logs import PUSH_STEPS, WINDOW, make_config, write_campaign_midway
 from analysis_logs import run_tables as _tables
@@ -149,3 +154,50 @@ def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
                    for line in text.get_text().splitlines())
         for axis in figure.axes:  # a panel title no wider than its panel and the gaps beside it
             assert axis.title.get_window_extent(renderer).width <= 1.1 * axis.get_window_extent(renderer).width
+
+
+def _schedule_campaign(folder) -> metrics.Analysis:
+    """FetchPush HER (K = 6 and K = 4), ARCHER at K = 6, linear b1=0.5 at K = 2 and K = 3, a success-driven
+    schedule (two seeds, one in progress) and an exponential decay: the schedules of Fig. 1."""
+    success = ScheduleConfig("success", beta1=0.5)
+    runs = {"her6": make_config(), "her4": make_config(epochs=4), "archer": make_config(lambda_h=0.5),
+            "lin2": make_config(schedule=ScheduleConfig("linear", beta1=0.5), epochs=2),
+            "lin3": make_config(schedule=ScheduleConfig("linear", beta1=0.5), epochs=3),
+            "exp": make_config(schedule=ScheduleConfig("exponential", beta1=0.5, beta2=0.5)),
+            "success0": make_config(schedule=success), "success1": make_config(schedule=success, seed=1)}
+    for name, config in runs.items():
+        curve = np.linspace(0, 1 if name != "success1" else 0.5, config.epochs)
+        write_run(folder / name, config, curve[:4] if name == "success1" else curve, complete=name != "success1")
+    return metrics.analyse(*_tables(folder), WINDOW)
+
+
+def test_fig1_draws_every_schedule_as_steps_of_its_epoch_rates_one_colour_per_line(tmp_path):
+    analysis = _schedule_campaign(tmp_path)
+    (figure,) = [figure for figure in all_figures(analysis) if figure.name == "schedules"]
+    drawn = figure.draw()
+    steps = {patch.get_label(): patch for axis in drawn.axes for patch in axis.patches if isinstance(patch, StepPatch)}
+    assert set(steps) == {"HER K=6, ARCHER", "HER K=4", "linear b1=0.5 K=2", "linear b1=0.5 K=3",
+                          "exp b1=0.5 b2=0.5", "success b1=0.5 on push (realised,\nmedian over seeds)"}
+    linear = steps["linear b1=0.5 K=3"].get_data()
+    assert linear.edges.tolist() == [0, 1, 2, 3]  # epoch k's rate drawn over (k - 1, k]: a step per epoch
+    assert linear.values.tolist() == pytest.approx(Linear(beta1=0.5).epoch_rates(3).tolist())
+    realised = analysis.epochs[analysis.epochs["schedule"] == "success"].groupby("epoch")["relabel_rate"].median()
+    success = steps["success b1=0.5 on push (realised,\nmedian over seeds)"].get_data()
+    assert success.values.tolist() == realised.tolist() and len(realised) == 6  # seed 1 to epoch 4, seed 0 to 6
+    colours = {label: matplotlib.colors.to_hex(patch.get_edgecolor()) for label, patch in steps.items()}
+    assert len(set(colours.values())) == len(colours)  # K = 2 and K = 3 apart too
+    assert [axis.get_title() for axis in drawn.axes] == [kind_title(kind) for kind in ("linear", "exponential", "success")]
+
+
+def test_every_figure_keeps_its_text_legible_at_the_pages_width(tmp_path):
+    """Every text of every figure is at least SMALLEST_FONT points, and no figure (four composition panels
+    included) is so wide that a 1280-px page shrinks that text below 9 px: PNG at 100 dpi, scaled to 1248 px."""
+    analysis = _schedule_campaign(tmp_path)
+    for figure in all_figures(analysis):
+        drawn = figure.draw()
+        drawn.canvas = FigureCanvasAgg(drawn)
+        drawn.canvas.draw()
+        sizes = [text.get_fontsize() for text in drawn.findobj(Text) if text.get_visible() and text.get_text()]
+        assert min(sizes) >= SMALLEST_FONT, figure.name
+        width = drawn.get_size_inches()[0] * 100
+        assert min(1.0, 1248 / width) * SMALLEST_FONT * 100 / 72 >= 9, (figure.name, width)
