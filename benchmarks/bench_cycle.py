@@ -12,6 +12,10 @@ move. Measured here, one after another, and printed with their ratios:
 (c) hersd's own ``collect`` + ``update`` steps (hersd/train.py) at 1 thread and at
     ``threads=auto`` (every core of this machine), with an empty buffer and with the buffer
     holding what 30 paper epochs store (3,000 episodes = 150,000 transitions);
+(c') hersd at 1 thread with ``precision=bf16`` (the updates' hidden layers in bfloat16), its
+    ratio to fp32 per cycle and per update (update = sampling a minibatch + one learner update),
+    on a CPU with bf16 instructions (skipped elsewhere: hersd refuses bf16 there); the bf16 and
+    the 1-thread fp32 runs alternate their cycles in one process;
 (d) stable-baselines3 2.9.2 DDPG + HerReplayBuffer configured the same (1 thread), with an
     empty buffer and with 150,000 stored transitions (its sampler's cost grows with the
     buffer); skipped if not installed (``pip install stable-baselines3==2.9.2``).
@@ -32,6 +36,8 @@ from torch import nn
 
 from hersd.compose import compose_train
 from hersd.config import DDPGConfig
+from hersd.envs.tasks import TASKS
+from hersd.learners.base import cpu_has_bf16
 from hersd.resources import available_cores
 from hersd.run_state import RunState
 from hersd.train import EpochStats, collect, update
@@ -119,25 +125,34 @@ def plain_update_seconds(in_dim: int, action_dim: int, cycles: int) -> float:
 
 
 # --------------------------------------------------------------------------- (c) hersd
-def hersd_seconds_per_cycle(threads: int, fill_episodes: int, cycles: int) -> float:
-    """hersd's collect + update per cycle at ``threads`` intra-op threads, the buffer holding at
-    least ``fill_episodes`` episodes (copies of real ones: sampling cost depends on the count only)."""
+def hersd_seconds(threads: int, fill_episodes: int, cycles: int,
+                  precisions: tuple[str, ...] = ("fp32",)) -> dict[str, tuple[float, float]]:
+    """hersd's collect + update at ``threads`` intra-op threads, one run per precision, the buffer holding at
+    least ``fill_episodes`` episodes (copies of real ones: sampling cost depends on the count only); the
+    runs' cycles alternate, so a load that comes and goes weighs on each alike. Precision -> (seconds per
+    cycle, seconds per update, its minibatch's sampling included)."""
     torch.set_num_threads(threads)
-    state = RunState(compose_train(["task=push", "quiet=true", f"threads={threads}"]))
-    stats = EpochStats(1, 0.8)
-    for _ in range(2):  # warm-up, and episodes to copy
-        collect(state, 0.8, stats)
-        update(state, 0.8, stats)
-    episodes = state.buffer.stored()
-    while state.buffer.size < fill_episodes:
-        state.buffer.store(episodes)
-    stats = EpochStats(1, 0.8)
-    for _ in range(cycles):
-        with stats.timed("cycle"):
+    states = {precision: RunState(compose_train(["task=push", "quiet=true", f"threads={threads}",
+                                                 f"precision={precision}"])) for precision in precisions}
+    for state in states.values():
+        stats = EpochStats(1, 0.8)
+        for _ in range(2):  # warm-up, and episodes to copy
             collect(state, 0.8, stats)
             update(state, 0.8, stats)
-    state.close()
-    return stats.seconds["cycle"] / cycles
+        episodes = state.buffer.stored()
+        while state.buffer.size < fill_episodes:
+            state.buffer.store(episodes)
+    stats = {precision: EpochStats(1, 0.8) for precision in precisions}
+    for _ in range(cycles):
+        for precision, state in states.items():
+            with stats[precision].timed("cycle"):
+                collect(state, 0.8, stats[precision])
+                with stats[precision].timed("update"):
+                    update(state, 0.8, stats[precision])
+    for state in states.values():
+        state.close()
+    return {precision: (stats[precision].seconds["cycle"] / cycles,
+                        stats[precision].seconds["update"] / (cycles * BATCHES)) for precision in precisions}
 
 
 # --------------------------------------------------------------------------- (d) stable-baselines3
@@ -152,7 +167,7 @@ def sb3_seconds_per_cycle(fill_transitions: int, cycles: int) -> float | None:
     import gymnasium as gym
 
     torch.set_num_threads(1)
-    env = make_vec_env(lambda: gym.make("FetchPush-v4"), n_envs=2, seed=0)
+    env = make_vec_env(lambda: gym.make(TASKS["push"].env_id), n_envs=2, seed=0)
     model = DDPG(
         "MultiInputPolicy", env, learning_rate=1e-3, buffer_size=1_000_000, batch_size=256, tau=0.05, gamma=0.98,
         learning_starts=STEPS_PER_CYCLE, train_freq=(50, "step"), gradient_steps=40,
@@ -199,8 +214,10 @@ def main() -> None:
     state.close()
     ideal = physics + BATCHES * flops / rate
     practical = physics + plain_update_seconds(in_dim, spec.action_dim, args.cycles)
-    hersd = {(threads, fill): hersd_seconds_per_cycle(threads, fill, args.cycles)
-             for threads in sorted({1, cores}) for fill in (0, FILL_EPISODES)}
+    one_thread = hersd_seconds(1, 0, args.cycles, ("fp32", "bf16") if cpu_has_bf16() else ("fp32",))
+    hersd = {(threads, fill): hersd_seconds(threads, fill, args.cycles)["fp32"][0]
+             for threads in sorted({1, cores}) for fill in (0, FILL_EPISODES) if (threads, fill) != (1, 0)}
+    hersd[(1, 0)] = one_thread["fp32"][0]
     sb3 = {fill: sb3_seconds_per_cycle(fill * HORIZON, args.cycles) for fill in (0, FILL_EPISODES)}
 
     print(f"matmul rate               {rate / 1e9:7.1f} GFLOP/s (fp32, 256x256x256, 1 thread)")
@@ -212,6 +229,13 @@ def main() -> None:
     print(f"(c) hersd, 1 thread       {one:7.3f} s/cycle -> {one / practical:.2f}x the practical floor, "
           f"{one / ideal:.2f}x the idealised one")
     print(f"    hersd, 1 thread, 30-epoch buffer {hersd[(1, FILL_EPISODES)]:7.3f} s/cycle")
+    if "bf16" not in one_thread:
+        print("    hersd, 1 thread, bf16     skipped: this CPU has no bf16 instructions")
+    else:
+        (bf16_cycle, bf16_update), fp32_update = one_thread["bf16"], one_thread["fp32"][1]
+        print(f"    hersd, 1 thread, bf16     {bf16_cycle:7.3f} s/cycle -> {one / bf16_cycle:.2f}x faster than fp32 "
+              f"per cycle; per update {bf16_update * 1e3:.2f} ms against {fp32_update * 1e3:.2f} ms, "
+              f"{fp32_update / bf16_update:.2f}x faster than fp32")
     if cores > 1:
         auto = hersd[(cores, 0)]
         print(f"    hersd, threads=auto ({cores}) {auto:7.3f} s/cycle -> {one / auto:.2f}x faster than 1 thread; "
