@@ -65,3 +65,45 @@ def test_pruning_with_seeds_reported_as_one_rising_step(tmp_path: Path, capsys, 
         in meta["command"]
     # the default storage lies where hersd-report looks by itself
     assert f"figures and tables: hersd-report {shlex.quote(str(tmp_path))}\n" in capsys.readouterr().out
+
+
+def test_a_resumed_run_reads_its_log_once_and_then_takes_each_epochs_record(tmp_path: Path, monkeypatch) -> None:
+    """A run resumed at epoch 3 of 4: epochs 1-2 come from its log, once; epochs 3-4 from the records
+    training hands the callback; every step is reported once, with the running AUC."""
+    import sys
+    from types import ModuleType, SimpleNamespace
+
+    from hersd.runlog import EPOCH_FIELDS, RunLogWriter
+    from sweeps.search import objective
+
+    success = [0.1, 0.2, 0.4, 0.8]
+    records = [{**{name: 0.0 for name in EPOCH_FIELDS}, "epoch": k + 1, "test_success": s}
+               for k, s in enumerate(success)]
+    log_path = tmp_path / "run" / "run.mcap"
+    log_path.parent.mkdir()
+
+    def resume_at_3(cfg, command="", on_epoch=None):
+        writer = RunLogWriter(log_path, {"run_id": "resumed"})
+        for record in records:
+            writer.write_epoch(record)
+            if record["epoch"] >= 3:  # epochs 1-2 were logged by an earlier session
+                on_epoch(record)
+        writer.finish(len(records))
+        return log_path
+
+    reads = []
+    read_log = objective.metric_values
+    monkeypatch.setattr(objective, "metric_values", lambda *args: reads.append(args[2:]) or read_log(*args))
+    monkeypatch.setitem(sys.modules, "hersd.train", ModuleType("hersd.train"))
+    sys.modules["hersd.train"].train = resume_at_3
+    study = optuna.create_study(direction="maximize")
+    trial = study.ask()
+    plan = SimpleNamespace(search=SimpleNamespace(metric="test_success", seeds=1), epochs=4, train_overrides=[],
+                           study_name="test", base=SimpleNamespace(threads="1"))
+    cfg = SimpleNamespace(run_dir=str(log_path.parent), seed=0, threads="1")
+    progress = TrialProgress(trial, "auc", epochs=4)
+    objective.train_seed(trial, plan, progress, {"kind": "constant", "eps": 0.8}, cfg, 0)
+    assert reads == [(2,), ()]  # the epochs before the resume, then the whole log once at the end
+    assert study.trials[0].intermediate_values == pytest.approx(
+        {k: float(np.mean(success[:k])) for k in range(1, 5)})
+    assert progress.value() == pytest.approx(np.mean(success))

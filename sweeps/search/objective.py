@@ -14,6 +14,7 @@ import os
 import shlex
 import socket
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +69,8 @@ class TrialProgress:
         self.objective = objective
         self.epochs = epochs
         self.seed_values: list[float] = []
-        self.reported: set[int] = set()
+        self.epochs_reported: dict[int, int] = {}  # seed index -> its epochs 1..n reported
+        self.last_step = 0
 
     def _prune(self, reason: str) -> None:
         """Stop the trial as pruned, recording why."""
@@ -76,18 +78,17 @@ class TrialProgress:
         raise optuna.TrialPruned(reason)
 
     def update(self, seed_index: int, values: np.ndarray, may_prune: bool) -> None:
-        """Report every unreported step of seed ``seed_index`` up to ``len(values)``; maybe prune."""
-        for epoch in range(1, len(values) + 1):
+        """Report the unreported steps of seed ``seed_index`` up to ``len(values)`` (values: its metric
+        of epochs 1..n, shape (n,)); maybe prune."""
+        for epoch in range(self.epochs_reported.get(seed_index, 0) + 1, len(values) + 1):
             step = seed_index * self.epochs + epoch
-            if step in self.reported:
-                continue
             running = float(np.mean(self.seed_values + [seed_objective(values[:epoch], self.objective)]))
             if not np.isfinite(running):
                 self._prune(f"non-finite objective at step {step}")
             self.trial.report(running, step)
-            self.reported.add(step)
+            self.epochs_reported[seed_index], self.last_step = epoch, step
         if may_prune and self.trial.should_prune():
-            self._prune(f"pruner at step {max(self.reported)}")
+            self._prune(f"pruner at step {self.last_step}")
 
     def finish_seed(self, values: np.ndarray) -> None:
         """Record a finished run's objective (a non-finite one prunes the trial)."""
@@ -116,23 +117,28 @@ def run_command(plan: SearchPlan, trial_number: int, params: dict[str, Any], cfg
 
 def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, params: dict[str, Any],
                cfg: TrainConfig, seed_index: int) -> None:
-    """Train (or resume, or find complete) one run of the trial, reporting each epoch; record its objective."""
+    """Train (or resume, or find complete) one run of the trial in its folder ``cfg.run_dir``, reporting
+    each epoch from the record training hands over; record its objective."""
     from hersd.train import train  # torch and MuJoCo: only in the processes that train
 
     metric, epochs = plan.search.metric, plan.epochs
-    log_path = RunFolder(run_dir(cfg)).log
+    log_path = RunFolder(Path(cfg.run_dir)).log
+    values: list[float] = []  # the run's metric of epochs 1..k so far, k = the last record's epoch
 
     def on_epoch(record: dict) -> None:
-        """After each logged epoch: heartbeat, report the steps so far, maybe prune."""
+        """After each logged epoch: heartbeat, report the new step(s), maybe prune."""
         _heartbeat(trial)
-        progress.update(seed_index, metric_values(log_path, metric, record["epoch"]), record["epoch"] < epochs)
+        if not values and record["epoch"] > 1:  # a resumed run: the epochs before it, once, from its log
+            values.extend(metric_values(log_path, metric, record["epoch"] - 1))
+        values.append(np.nan if record[metric] is None else record[metric])
+        progress.update(seed_index, np.array(values, dtype=float), record["epoch"] < epochs)
 
     train(cfg, command=run_command(plan, trial.number, params, cfg), on_epoch=on_epoch)
-    values = metric_values(log_path, metric)
-    if len(values) != epochs:
-        raise RuntimeError(f"{log_path} holds {len(values)} of {epochs} epochs after training")
-    progress.update(seed_index, values, may_prune=seed_index < plan.search.seeds - 1)
-    progress.finish_seed(values)
+    logged = metric_values(log_path, metric)  # also a run found complete, which trained no epoch here
+    if len(logged) != epochs:
+        raise RuntimeError(f"{log_path} holds {len(logged)} of {epochs} epochs after training")
+    progress.update(seed_index, logged, may_prune=seed_index < plan.search.seeds - 1)
+    progress.finish_seed(logged)
 
 
 def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: list[str] | None = None) -> float:
@@ -149,7 +155,8 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
     try:
         for seed_index in range(plan.search.seeds):
             cfg = trial_config(plan.base, params, plan.search.first_seed + seed_index, threads)
-            run_dirs.append(str(run_dir(cfg)))
+            cfg = replace(cfg, run_dir=str(run_dir(cfg)))  # its folder, computed once: training takes it as given
+            run_dirs.append(cfg.run_dir)
             trial.set_user_attr(RUN_DIRS_ATTR, run_dirs)  # before training: failed and pruned trials have it too
             train_seed(trial, plan, progress, params, cfg, seed_index)
     except KeyboardInterrupt:
