@@ -39,6 +39,7 @@ import numpy as np
 import torch
 
 from hersd.denormals import set_intra_op_threads
+from hersd.envs.tasks import TASKS
 from hersd.render import load_run
 from hersd.run_state import RunState
 from hersd.train import EpochStats, collect, run_epoch, update
@@ -130,7 +131,7 @@ def sb3_model(fill_transitions: int):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.noise import NormalActionNoise
 
-    env = make_vec_env(lambda: gym.make("FetchPush-v4"), n_envs=ENVS, seed=0)
+    env = make_vec_env(lambda: gym.make(TASKS["push"].env_id), n_envs=ENVS, seed=0)
     model = DDPG(
         "MultiInputPolicy", env, learning_rate=1e-3, buffer_size=1_000_000, batch_size=256, tau=0.05, gamma=0.98,
         learning_starts=STEPS_PER_CYCLE, train_freq=(HORIZON, "step"), gradient_steps=BATCHES,

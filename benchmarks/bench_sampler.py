@@ -32,6 +32,7 @@ import numpy as np
 
 import hersd.envs.make  # noqa: F401  (registers the gymnasium-robotics envs quietly)
 from hersd.envs.goal_envs import vectorised_reward
+from hersd.envs.tasks import TASKS
 from hersd.replay.buffer import Episodes, sample_transitions
 
 EPISODES, HORIZON, OBS, GOAL, ACTION = 20_000, 50, 25, 3, 4  # 1e6 transitions of FetchPush
@@ -67,7 +68,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=2000, help="minibatches per timing")
     parser.add_argument("--repeats", type=int, default=7, help="timings per variant (alternating)")
     args = parser.parse_args()
-    env = gym.make("FetchPush-v4").unwrapped
+    env = gym.make(TASKS["push"].env_id).unwrapped
     threshold = float(env.distance_threshold)
     variants = {
         BEFORE: partial(reward_before, distance_threshold=threshold),
