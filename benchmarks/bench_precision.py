@@ -1,20 +1,33 @@
-"""How far a bf16 critic's Q lies from the float32 one's, with its output layer in bf16 or in float32.
+"""precision=bf16 against fp32: how far a bf16 critic's Q lies from the float32 one's, with its output
+layer in bf16 or in float32, and the CPU time of one DDPG update at each precision.
 
-A freshly initialised critic of the paper's size (3 x 256 ReLU, FetchPush's 32 inputs) on one batch
+(1) A freshly initialised critic of the paper's size (3 x 256 ReLU, FetchPush's 32 inputs) on one batch
 of 256 normalised inputs, its output bias set to 0 and to -15 (a trained Fetch critic's Q lies in
 [-50, 0]), run under bf16 autocast with every layer bf16 and with the output layer float32
 (:class:`hersd.learners.base.FullPrecisionLinear`, what precision=bf16 builds), each against float32.
+(2) CPU seconds (process time: what a loaded machine's time slicing leaves out) of one DDPG update at
+FetchPush's sizes and the paper's settings, 1 thread, random batches of 256, the precisions alternating
+in rounds of 40 updates; needs a CPU with bf16 instructions.
 
-Usage: python benchmarks/bench_precision.py (a second; docs/LEARNERS.md, "Precision").
+Usage: python benchmarks/bench_precision.py [--rounds 4] (half a minute; docs/LEARNERS.md, "Precision").
 """
 
 from __future__ import annotations
 
+import argparse
+import time
+
+import numpy as np
 import torch
 
-from hersd.learners.base import FullPrecisionLinear, mlp
+from hersd.config import DDPGConfig
+from hersd.envs.make import EnvSpec
+from hersd.learners.base import FullPrecisionLinear, cpu_has_bf16, mlp
+from hersd.learners.ddpg import DDPG
+from hersd.replay.buffer import TransitionBatch
 
 INPUTS, BATCH, OFFSETS = 32, 256, (0.0, -15.0)
+OBS, GOAL, ACTION, UPDATES = 25, 3, 4, 40  # FetchPush's sizes; updates per round (one cycle's)
 
 
 def q_errors(offset: float) -> dict[str, torch.Tensor]:
@@ -33,10 +46,51 @@ def q_errors(offset: float) -> dict[str, torch.Tensor]:
                     "output layer float32": (float_output(inputs) - q).abs()}
 
 
+def random_batch(rng: np.random.Generator) -> TransitionBatch:
+    """BATCH random FetchPush-sized transitions, rewards 0 or -1, a fifth of them real-goal rows."""
+    def normal(dim: int) -> np.ndarray:
+        return rng.normal(size=(BATCH, dim)).astype(np.float32)
+    zeros = np.zeros(BATCH, int)
+    return TransitionBatch(obs=normal(OBS), next_obs=normal(OBS), goal=normal(GOAL),
+                           action=rng.uniform(-1, 1, (BATCH, ACTION)).astype(np.float32),
+                           reward=-rng.integers(0, 2, BATCH).astype(np.float32), relabelled=rng.random(BATCH) < 0.8,
+                           real_success=zeros.astype(bool), episode=zeros, t=zeros)
+
+
+def update_cpu_seconds(rounds: int) -> dict[str, list[float]]:
+    """Precision -> CPU seconds per update of each round (the precisions alternating, after a warm-up)."""
+    torch.set_num_threads(1)
+    spec = EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=1.0,
+                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
+    rng = np.random.default_rng(0)
+    batches = [random_batch(rng) for _ in range(UPDATES)]
+    learners = {precision: DDPG(DDPGConfig(), spec, 0.98, (-50.0, 0.0), precision=precision)
+                for precision in ("fp32", "bf16")}
+    seconds: dict[str, list[float]] = {precision: [] for precision in learners}
+    for round_ in range(rounds + 1):
+        for precision, learner in learners.items():
+            tic = time.process_time()
+            for batch in batches:
+                learner.update(batch)
+            if round_:  # round 0 warms up
+                seconds[precision].append((time.process_time() - tic) / UPDATES)
+    return seconds
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=4)
+    args = parser.parse_args()
     for offset in OFFSETS:
         for label, error in q_errors(offset).items():
             print(f"Q near {offset:+5.0f}, {label:<21} mean abs error {error.mean():.1e}, max {error.max():.1e}")
+    if not cpu_has_bf16():
+        print("DDPG update CPU time: skipped, this CPU has no bf16 instructions")
+        return
+    seconds = update_cpu_seconds(args.rounds)
+    fp32, bf16 = (float(np.median(seconds[precision])) for precision in ("fp32", "bf16"))
+    print(f"DDPG update CPU time (median of {args.rounds} rounds of {UPDATES}): fp32 {fp32 * 1e3:.2f} ms, "
+          f"bf16 {bf16 * 1e3:.2f} ms -> bf16 {fp32 / bf16:.2f}x faster")
 
 
 if __name__ == "__main__":
