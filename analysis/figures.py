@@ -25,7 +25,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
-from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS  # noqa: E402
+from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, PAPER_EPOCHS  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 from hersd.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
 from hersd.envs.tasks import task_rank, task_title  # noqa: E402
@@ -148,17 +148,19 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
 
 # --- layout ------------------------------------------------------------------------------------------------------
 
-def _panels(count: int, title: str, legend_width: float = 0.0, sharey: bool = True, title_lines: int = 1):
+def _panels(count: int, title: str, legend_width: float = 0.0, sharey: bool = True, title_lines: int = 1,
+            sharex: bool = True):
     """A figure of ``count`` panels in rows of at most MAX_COLUMNS, laid out with fixed margins in
     inches (``legend_width`` kept free on the right, ``title_lines`` lines above each panel for its
-    title); the figure title is wrapped to the figure's width. Inner panels share the x axis (and
-    the y axis with ``sharey``) and show tick labels only on the outside. Returns (figure, axes)."""
+    title); the figure title is wrapped to the figure's width. Inner panels share the x axis (with ``sharex``,
+    else each has its x tick labels) and the y axis (with ``sharey``), and show tick labels only on the outside.
+    Returns (figure, axes)."""
     columns = min(count, MAX_COLUMNS)
     rows = -(-count // columns)
     panel_width, panel_height = PANEL_SIZE
     left, right, bottom = 0.95, 0.15, 0.55
     gap_width = 0.25 if sharey else 0.6
-    gap_height = 0.3 + 0.2 * title_lines
+    gap_height = 0.3 + 0.2 * title_lines + (0.0 if sharex else 0.25)
     width = left + columns * panel_width + (columns - 1) * gap_width + legend_width + right
     title = _fitting(title, width - 0.2, TITLE_SIZE)
     top = 0.25 + 0.22 * _lines(title) + 0.2 * title_lines
@@ -170,10 +172,11 @@ def _panels(count: int, title: str, legend_width: float = 0.0, sharey: bool = Tr
     axes = []
     for index in range(count):  # only the panels drawn: an empty grid cell costs as much as a panel
         shared = axes[0] if axes else None
-        axis = figure.add_subplot(grid[index // columns, index % columns], sharex=shared,
+        axis = figure.add_subplot(grid[index // columns, index % columns], sharex=shared if sharex else None,
                                   sharey=shared if sharey else None)
         axis.grid(alpha=0.3)
-        axis.tick_params(labelbottom=index + columns >= count, labelleft=index % columns == 0 or not sharey)
+        axis.tick_params(labelbottom=index + columns >= count or not sharex,
+                         labelleft=index % columns == 0 or not sharey)
         axes.append(axis)
     figure.suptitle(title, fontsize=TITLE_SIZE, y=1 - 0.08 / height, va="top")
     return figure, axes
@@ -208,12 +211,15 @@ def _legend_width(labels, fontsize: float = LEGEND_SIZE) -> float:
     return max(LEGEND_WIDTH, 0.7 + longest * GLYPH_WIDTH * fontsize / 72)
 
 
-def _figure_legend(figure: Figure, axes, legend_width: float, **options) -> None:
-    """One legend for the figure in the space _panels kept on the right; one entry per label."""
+def _figure_legend(figure: Figure, axes, legend_width: float, order: list[str] | None = None, **options) -> None:
+    """One legend for the figure in the space _panels kept on the right; one entry per label (in the order of
+    ``order``'s labels, wrapped as the legend wraps them, when given)."""
     entries = {}
     for axis in axes:
         for handle, label in zip(*axis.get_legend_handles_labels()):
             entries.setdefault(label, handle)
+    if order is not None:
+        entries = {_legend_label(label): entries[_legend_label(label)] for label in order}
     width, _ = figure.get_size_inches()
     top = axes[0].get_position().y1
     options = {"fontsize": LEGEND_SIZE, **options}
@@ -275,10 +281,13 @@ def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
 
 
 def _line_colours(curves: pd.DataFrame, styles: dict[str, dict]) -> dict[str, tuple | str]:
-    """Each line's colour (``curves``: schedule_curves): its first configuration's, or where another line
-    took that, the first PALETTE colour no line has."""
+    """Each line's colour (``curves``: schedule_curves; ``styles``: config_styles, in configuration order): its
+    first configuration's, or where a line earlier in configuration order took that, the first PALETTE colour no
+    line has. Returns the lines in the legend's order (the configurations')."""
+    lines = curves[["line", "configs"]].drop_duplicates("line")
+    rank = {config: index for index, config in enumerate(styles)}
     colours: dict[str, tuple | str] = {}
-    for line, config in curves[["line", "configs"]].drop_duplicates("line").itertuples(index=False):
+    for line, config in sorted(lines.itertuples(index=False), key=lambda item: rank[item[1]]):
         colour = styles[config]["color"]
         if colour in colours.values():
             colour = next((c for c in PALETTE if c not in colours.values()), colour)
@@ -286,21 +295,35 @@ def _line_colours(curves: pd.DataFrame, styles: dict[str, dict]) -> dict[str, tu
     return colours
 
 
+def _schedule_panels(curves: pd.DataFrame) -> list[tuple[str, int]]:
+    """Fig. 1's panels: one per decay kind and K of ``curves`` (schedule_curves), the paper's K first, then one
+    per K that has only constant rates."""
+    decays = curves[~curves["constant_rate"].astype(bool)]
+    panels = sorted(set(zip(decays["schedule"], decays["total_epochs"])),
+                    key=lambda panel: (schedule_rank(panel[0]), panel[0], panel[1] != PAPER_EPOCHS, panel[1]))
+    constant_only = sorted(set(curves["total_epochs"]) - {total for _, total in panels},
+                           key=lambda total: (total != PAPER_EPOCHS, total))
+    return panels + [(curves.loc[curves["total_epochs"] == total, "schedule"].iloc[0], total) for total in constant_only]
+
+
 def _draw_schedules(curves: pd.DataFrame, colours: dict[str, tuple | str]) -> Figure:
-    kinds = decay_kinds(curves) or list(dict.fromkeys(curves["schedule"]))
+    panels = _schedule_panels(curves)
+    several_k = curves["total_epochs"].nunique() > 1
     legend_width = _legend_width(colours)
-    figure, axes = _panels(len(kinds), "Relabel-rate schedules ε(k)", legend_width=legend_width)
-    for axis, kind in zip(axes, kinds):
-        shown = curves[curves["constant_rate"].astype(bool) | (curves["schedule"] == kind)]
+    figure, axes = _panels(len(panels), "Relabel-rate schedules ε(k)", legend_width=legend_width,
+                           sharex=not several_k)
+    for axis, (kind, total) in zip(axes, panels):
+        shown = curves[(curves["total_epochs"] == total)
+                       & (curves["constant_rate"].astype(bool) | (curves["schedule"] == kind))]
         for line, curve in shown.groupby("line", sort=False):
             epoch = curve["epoch"].to_numpy()
             axis.stairs(curve["eps"].to_numpy(), edges=[*(epoch - 1), epoch[-1]], baseline=None, color=colours[line],
                         linewidth=1.5, linestyle="--" if curve["constant_rate"].iloc[0] else "-",
                         label=_legend_label(line))
-        _set_title(axis, kind_title(kind))
+        _set_title(axis, kind_title(kind) + (f", K = {total}" if several_k else ""))
         axis.set_ylim(-0.02, 1.02)
     _label_outer(axes, "relabel rate ε(k)\n(share of goals relabelled)", xlabel="epoch k")
-    _figure_legend(figure, axes, legend_width)
+    _figure_legend(figure, axes, legend_width, order=list(colours))
     return figure
 
 

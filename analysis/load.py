@@ -126,11 +126,11 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
 def _config_order(run: dict[str, Any]) -> tuple:
     """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success and
     the other kinds (hersd.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
-    K."""
+    K (the paper's first)."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
     return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
             run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"],
-            run["total_epochs"])
+            run["total_epochs"] != PAPER_EPOCHS, run["total_epochs"])
 
 
 def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:

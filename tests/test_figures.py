@@ -186,7 +186,12 @@ def test_fig1_draws_every_schedule_as_steps_of_its_epoch_rates_one_colour_per_li
     assert success.values.tolist() == realised.tolist() and len(realised) == 6  # seed 1 to epoch 4, seed 0 to 6
     colours = {label: matplotlib.colors.to_hex(patch.get_edgecolor()) for label, patch in steps.items()}
     assert len(set(colours.values())) == len(colours)  # K = 2 and K = 3 apart too
-    assert [axis.get_title() for axis in drawn.axes] == [kind_title(kind) for kind in ("linear", "exponential", "success")]
+    # a panel per kind and K (x: that K's epochs), K = 4's constant rate in its own
+    assert [axis.get_title() for axis in drawn.axes] == [
+        f"{kind_title(kind)}, K = {total}" for kind, total in (("linear", 2), ("linear", 3), ("exponential", 6),
+                                                              ("success", 6), ("constant", 4))]
+    for axis, total in zip(drawn.axes, (2, 3, 6, 6, 4)):
+        assert {patch.get_data().edges[-1] for patch in axis.patches} == {total}
 
 
 def test_every_figure_keeps_its_text_legible_at_the_pages_width(tmp_path):
