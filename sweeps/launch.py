@@ -18,7 +18,7 @@ import time
 import traceback
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from omegaconf import DictConfig
 
@@ -35,19 +35,30 @@ PLAN_NAME = "sweep.json"
 _composed = False  # set once the sweeper is reached: the command line composed into a config
 
 
-def concurrent_runs(launcher: DictConfig, n_runs: int) -> int:
-    """How many of the sweep's ``n_runs`` share this machine's cores at once: joblib's n_jobs
-    (-1: one per core, as joblib counts), all of them for submitit_local, 1 for SLURM (each job has its own
-    allocation) and for Hydra's basic launcher (one after another)."""
-    target = str(launcher.get("_target_", ""))
-    if target.endswith("JoblibLauncher"):
-        n_jobs = int(launcher.get("n_jobs") or -1)
-        at_once = n_jobs if n_jobs > 0 else max(1, available_cores() + 1 + n_jobs)  # joblib's rule for n_jobs < 0
-    elif target.endswith("submitit_launcher.LocalLauncher"):
-        at_once = int(launcher.get("array_parallelism") or n_runs)
-    else:
-        at_once = 1
-    return max(1, min(at_once, n_runs))
+def _joblib_runs(n_jobs: int) -> int:
+    """joblib's ``n_jobs``: that many at once; -1 one per core, -2 all cores but one, ... (joblib's rule)."""
+    return n_jobs if n_jobs > 0 else max(1, available_cores() + 1 + n_jobs)
+
+
+# How many of a sweep's n_runs train on this machine at once, read from the launcher's own settings:
+# the first key of this table that its config has decides (so a launcher YAML needs no code).
+# None: its jobs run elsewhere, each on its own allocation, and resolve threads=auto there.
+RUNS_AT_ONCE: tuple[tuple[str, Callable[[Any, int], int | None]], ...] = (
+    ("partition", lambda partition, n_runs: None),  # a cluster's queue (submitit's SLURM)
+    ("n_jobs", lambda n_jobs, n_runs: _joblib_runs(int(n_jobs or -1))),  # joblib
+    ("array_parallelism", lambda at_most, n_runs: int(at_most or n_runs)),  # an executor's cap
+    ("tasks_per_node", lambda tasks, n_runs: n_runs),  # an executor that starts every job (submitit's local)
+)  # none of them (Hydra's basic launcher): one after another
+
+
+def concurrent_runs(launcher: DictConfig, n_runs: int) -> int | None:
+    """How many of the sweep's ``n_runs`` share this machine's cores at once (:data:`RUNS_AT_ONCE`),
+    None if each runs on an allocation of its own."""
+    for key, runs_at_once in RUNS_AT_ONCE:
+        if key in launcher:
+            at_once = runs_at_once(launcher.get(key), n_runs)
+            return None if at_once is None else max(1, min(at_once, n_runs))
+    return 1
 
 
 def with_threads(job: list[str], threads: int) -> list[str]:
@@ -102,8 +113,8 @@ def list_runs(planned: dict) -> None:
 
 
 def check_launcher(launcher: DictConfig) -> None:
-    """joblib's ``n_jobs`` (runs at once on this machine) must be 1 or more (SweepError, exit 2)."""
-    if not str(launcher.get("_target_", "")).endswith("JoblibLauncher"):
+    """A launcher's ``n_jobs`` (runs at once on this machine) must be 1 or more (SweepError, exit 2)."""
+    if "n_jobs" not in launcher:
         return
     n_jobs = launcher.get("n_jobs")
     if not isinstance(n_jobs, int) or n_jobs < 1:
@@ -113,11 +124,10 @@ def check_launcher(launcher: DictConfig) -> None:
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
     """``threads=auto`` for each run of a local launcher: this machine's idle cores divided among
-    the runs in flight at once (:func:`hersd.resources.resolve_threads`). None for SLURM: each job
-    resolves ``auto`` itself from what it was given (``SLURM_CPUS_PER_TASK``, its CPU affinity)."""
-    if str(launcher.get("_target_", "")).endswith("SlurmLauncher"):
-        return None
-    return resolve_threads("auto", concurrent_runs(launcher, n_runs))
+    the runs in flight at once (:func:`hersd.resources.resolve_threads`). None where each job has
+    an allocation of its own (SLURM): it resolves ``auto`` itself (``SLURM_CPUS_PER_TASK``, its CPU affinity)."""
+    at_once = concurrent_runs(launcher, n_runs)
+    return None if at_once is None else resolve_threads("auto", at_once)
 
 
 def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
@@ -199,7 +209,9 @@ def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -
           f"({seconds:.0f} s)  ETA {eta}", flush=True)
 
 
-LAUNCHERS = ("local", "slurm", "submitit_local")  # hydra/launcher options hersd-sweep supports
+def launcher_options() -> list[str]:
+    """The hydra/launcher options: hersd's YAMLs (conf/hydra/launcher) and submitit's own local one."""
+    return [*group_options("hydra/launcher"), "submitit_local"]
 
 
 def usage() -> str:
@@ -213,11 +225,12 @@ def usage() -> str:
         "given a comma list (schedule=constant,linear) is swept. --dry-run lists each run and its state",
         "(complete; running: epoch N of K and its pid; resumable: epoch N of K; new) without running.", "",
         "config groups:", *groups,
-        f"  hydra/launcher={'|'.join(LAUNCHERS)}   (local: this machine, one run per core, the default)", "",
-        "keys: seeds=5 (grids sweep seed over range(seeds)), results_dir=results, hydra.launcher.n_jobs=N",
-        "(local: runs at once), every hersd-train key (hersd-train --help lists them).", "",
+        f"  hydra/launcher={'|'.join(launcher_options())}   (local: this machine, one run per core, the default)", "",
+        "keys: seeds=5 (without seed=, each grid sweeps seed over range(seeds)), results_dir=results,",
+        "hydra.launcher.n_jobs=N (local: runs at once), every hersd-train key (hersd-train --help lists them).", "",
         "examples:",
         "  hersd-sweep +grid=smoke",
+        "  hersd-sweep task=reach seeds=3 schedule=linear schedule.beta1=0.5,0.7   (6 runs)",
         "  hersd-sweep +grid=beta task=push seeds=3 epochs=50 --dry-run",
         "  hersd-sweep +grid=beta hydra/launcher=slurm hydra.launcher.partition=P",
         "See README.md (Commands) and docs/ARCHITECTURE.md (sweeps/).",

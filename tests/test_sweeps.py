@@ -56,9 +56,9 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
     runs = listed_runs(result.stdout)
     assert len(runs) >= 6
     for run in runs:
-        tag = Path(run).parent.name  # exponential-b1_<beta1>-b2_<beta2>
-        beta1, beta2 = map(float, re.fullmatch(r"exponential-b1_([\d.]+)-b2_(-?[\d.]+)", tag).groups())
-        assert 0.8 <= mean_rate_exact(beta1, beta2, 200) <= 0.889
+        tag = Path(run).parent.name  # exponential-b1_<beta1>-b2_<beta2>, or linear-b1_<beta1> where beta2 = 0
+        beta1, beta2 = re.fullmatch(r"(?:exponential|linear)-b1_([\d.]+)(?:-b2_(-?[\d.]+))?", tag).groups()
+        assert 0.8 <= mean_rate_exact(float(beta1), float(beta2 or 0), 200) <= 0.889
 
 
 @pytest.mark.parametrize("args, expected", [
@@ -214,14 +214,47 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
     assert read_run(next(tmp_path.rglob("seed1-*/run.mcap"))).meta["threads"] == 1  # an explicit count wins
 
 
-def test_threads_auto_per_launcher(idle_machine):
-    """joblib shares this machine's cores among its runs in flight; a SLURM job resolves its own."""
-    from omegaconf import OmegaConf
+def launcher_config(*overrides: str):
+    """The composed ``hydra.launcher`` node of a sweep with these overrides."""
+    from hersd.compose import compose
+    from sweeps.launch import register_schemas
 
-    from sweeps.launch import auto_threads
+    register_schemas()
+    return compose("sweep", ["+grid=smoke", *overrides], job_name="test", with_hydra=True).hydra.launcher
 
-    slurm = "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher"
-    joblib = "hydra_plugins.hydra_joblib_launcher.joblib_launcher.JoblibLauncher"
-    assert auto_threads(OmegaConf.create({"_target_": slurm, "cpus_per_task": 4}), n_runs=10) is None
-    assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": 1}), n_runs=10) == available_cores()
-    assert auto_threads(OmegaConf.create({"_target_": joblib, "n_jobs": -1}), n_runs=1) == available_cores()
+
+def test_runs_at_once_come_from_each_launchers_own_settings(idle_machine):
+    """joblib: its n_jobs; submitit's local executor: every run; Hydra's basic launcher: one after
+    another; SLURM: each job on its own allocation, resolving threads=auto there (None)."""
+    from sweeps.launch import auto_threads, concurrent_runs
+
+    assert concurrent_runs(launcher_config("hydra.launcher.n_jobs=1"), n_runs=10) == 1
+    assert concurrent_runs(launcher_config(), n_runs=10) == available_cores()
+    assert concurrent_runs(launcher_config("hydra/launcher=submitit_local"), n_runs=10) == 10
+    assert concurrent_runs(launcher_config("hydra/launcher=basic"), n_runs=10) == 1
+    assert concurrent_runs(launcher_config("hydra/launcher=slurm"), n_runs=10) is None
+    assert auto_threads(launcher_config("hydra/launcher=slurm"), n_runs=10) is None
+    assert auto_threads(launcher_config("hydra.launcher.n_jobs=1"), n_runs=10) == available_cores()
+    assert auto_threads(launcher_config("hydra.launcher.n_jobs=-1"), n_runs=1) == available_cores()
+
+
+USER_LAUNCHER = """# @package hydra.launcher
+# A user's launcher: submitit's local executor, its jobs cut after 10 minutes.
+defaults:
+  - submitit_local
+timeout_min: 10
+"""
+
+
+def test_a_launcher_yaml_alone_runs_the_smoke_grid(tmp_path):
+    """A launcher added as one YAML in a config dir of the user's (hydra.searchpath), no Python edit."""
+    conf = tmp_path / "conf"
+    (conf / "hydra" / "launcher").mkdir(parents=True)
+    (conf / "hydra" / "launcher" / "mine.yaml").write_text(USER_LAUNCHER)
+    args = ["+grid=smoke", "schedule=constant", "seeds=1", "epochs=1", *TINY, f"hydra.searchpath=[file://{conf}]",
+            "hydra/launcher=mine", f"results_dir={tmp_path / 'results'}"]
+    assert len(listed_runs(sweep(*args, "--dry-run").stdout)) == 1
+    result = sweep(*args)
+    logs = list((tmp_path / "results").rglob("run.mcap"))
+    assert "1 done" in result.stdout and len(logs) == 1 and read_run(logs[0]).complete, result.stdout + result.stderr
+    assert (tmp_path / "results" / ".sweeps").exists() and list(tmp_path.rglob(".submitit"))  # submitit ran it
