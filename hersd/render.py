@@ -15,6 +15,7 @@ each tried first in a short subprocess: PyOpenGL's platform cannot change once i
 from __future__ import annotations
 
 import argparse
+import copy
 import functools
 import os
 import subprocess
@@ -257,7 +258,9 @@ def policy_from_checkpoint(cfg: TrainConfig, checkpoint: dict[str, Any]) -> Goal
     env = make_env(cfg.task)
     spec = env_spec(env)
     env.close()
-    agent = make_agent(cfg, spec, *discounting(cfg, spec), torch.device("cpu"))
+    acting = copy.copy(cfg)
+    acting.precision = "fp32"  # acting is float32 at either precision: a bf16 run renders on any CPU
+    agent = make_agent(acting, spec, *discounting(cfg, spec), torch.device("cpu"))
     agent.load_state_dict(checkpoint["agent"])
     return agent
 

@@ -16,6 +16,8 @@ import hersd.learners.base as base
 from hersd.compose import compose_train
 from hersd.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
 from hersd.learners import learner_class
+from hersd.envs.make import env_spec, make_env
+from hersd.run_state import discounting
 from hersd.runlog import read_run
 from hersd.runstore import config_hash, run_identity
 from hersd.train import train
@@ -38,6 +40,14 @@ def learner(name: str, precision: str):
     rng = np.random.default_rng(0)
     agent.update_normalizers(rng.normal(size=(100, OBS)), rng.normal(size=(100, GOAL)))
     return agent
+
+
+def run_sizes(cfg: TrainConfig) -> tuple:
+    """(spec, gamma, q_range) of ``cfg``'s task."""
+    env = make_env(cfg.task)
+    spec = env_spec(env)
+    env.close()
+    return (spec, *discounting(cfg, spec))
 
 
 def linear_output_dtypes(agent) -> dict[str, set[torch.dtype]]:
@@ -112,3 +122,15 @@ def test_bf16_ddpg_learns_fetch_reach(tmp_path):
     log = read_run(train(compose_train(["task=reach", "precision=bf16", "epochs=5", "seed=0", "quiet=true",
                                         "threads=1", "bias.epochs=[]", f"results_dir={tmp_path}"])))
     assert log.epochs["test_success"].max() >= 0.9, log.epochs["test_success"].tolist()
+
+
+def test_a_bf16_runs_policy_renders_on_a_cpu_without_bf16_instructions(monkeypatch):
+    """hersd-render builds the run's learner only to act, which is float32 at either precision."""
+    from hersd.render import policy_from_checkpoint
+
+    cfg = compose_train(["task=reach", "precision=bf16"])
+    monkeypatch.setattr(base, "cpu_has_bf16", lambda: True)
+    trained = learner_class("ddpg").build(cfg, *run_sizes(cfg), torch.device("cpu"))
+    monkeypatch.setattr(base, "cpu_has_bf16", lambda: False)
+    agent = policy_from_checkpoint(cfg, {"agent": trained.state_dict()})
+    assert all(torch.equal(p, q) for p, q in zip(agent.actor.parameters(), trained.actor.parameters()))
