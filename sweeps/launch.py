@@ -23,7 +23,7 @@ from typing import Any, Callable
 from omegaconf import DictConfig
 
 from hersd.compose import CONFIG_PATH, group_options
-from hersd.config import ConfigError
+from hersd.errors import ConfigError
 from hersd.resources import available_cores, resolve_threads
 from hersd.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error

@@ -34,7 +34,8 @@ from typing import Any
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 from hersd.compose import open_schedule, register_schema, register_train_schema
-from hersd.config import ConfigError, TrainConfig, to_train_config
+from hersd.config import TrainConfig, to_train_config
+from hersd.errors import ConfigError
 from hersd.resources import available_cores
 from hersd.runstore import run_dir
 from sweeps.hydra_private import apply_value_overrides, basic_sweeper_class, group_test, grid_overrides
