@@ -251,7 +251,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     if not claims.empty:
         parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(_titled(claims))]
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
-              html_table(_titled(analysis.summary.drop(columns="mu_eps")),  # wider than the page: in Fig. 12
+              html_table(_titled(_page_summary(analysis.summary)),
                          epochs=_common_epochs(analysis.summary, runs)),
               "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
               html_table(analysis.aggregate), *_tests_html(analysis.tests), *_equal_mu_html(analysis.equal_mu_tests),
@@ -278,6 +278,14 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", *_runs_html(analysis), *provenance_html(provenance)]
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def _page_summary(summary: pd.DataFrame) -> pd.DataFrame:
+    """The summary as the page shows it, as wide as the page: without mu_eps (in Fig. 12 and the files), the IQM's
+    interval in one column (``[low, high]``)."""
+    interval = ["" if pd.isna(low) else f"[{low:.3f}, {high:.3f}]" for low, high in zip(summary["iqm_low"], summary["iqm_high"])]
+    table = summary.drop(columns=["mu_eps", "iqm_high"]).rename(columns={"iqm_low": "iqm_interval"})
+    return table.assign(iqm_interval=interval)
 
 
 def _tests_html(tests: pd.DataFrame) -> list[str]:
