@@ -14,6 +14,11 @@ wall-clock is mostly its commits' disk syncs). The callback once re-read the tri
 epoch, so K^2 over the run); it now takes the record it is handed. To measure the earlier code,
 run this with ``PYTHONPATH`` set to a checkout of it.
 
+Measured on 2 cores busy with a training campaign (load ~6), 200 epochs, CPU time: with the
+study in memory, the callback's own work went from 0.7 ms at epoch 1 growing to 6.2 ms at epoch
+200 (0.75 s over the run) to a flat 0.2 ms (0.05 s); with SQLite, 3.1 s -> 2.2 s over the run,
+whose wall-clock (11-24 s either way) is the database's commits and varies with the disk's load.
+
 Usage: python benchmarks/bench_trial.py [--epochs 200] [--log results/.../run.mcap]
 """
 
