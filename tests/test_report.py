@@ -257,3 +257,43 @@ def test_the_summary_header_names_the_epoch_of_final_success_when_the_rows_share
     assert "<th>test success at epoch 6, median over seeds</th>" in pages["push"]
     assert "<th>test success at epoch K, median over seeds</th>" in pages["both"]  # FetchReach ran 4 epochs
     assert "<td class=text>FetchPush</td>" in pages["both"] and "<td class=text>FetchReach</td>" in pages["both"]
+
+
+def _paper_and_smoke(folder: Path, smoke: bool) -> None:
+    """HER and linear b1=0.25 on FetchPush at the paper's K = 200 (2 seeds each), an exponential decay on
+    FetchPickAndPlace whose two runs are both in progress (epoch 3 of 200), and with ``smoke`` the quick start's
+    sweep: FetchReach HER and linear b1=0.25 at K = 4, 2 seeds each."""
+    from analysis.load import PAPER_EPOCHS
+    from hersd.config import ScheduleConfig
+
+    linear = ScheduleConfig("linear", beta1=0.25)
+    for seed in (0, 1):
+        for name, schedule in (("her", None), ("linear", linear)):
+            write_run(folder / f"push/{name}{seed}", make_config(schedule=schedule, seed=seed, epochs=PAPER_EPOCHS),
+                      np.linspace(0, 0.9 + 0.05 * seed, PAPER_EPOCHS))
+            if smoke:
+                write_run(folder / f"runs/reach/{name}{seed}",
+                          make_config(task="reach", schedule=schedule, seed=seed, epochs=4), np.ones(4))
+        write_run(folder / f"pick_and_place/exp{seed}",
+                  make_config(task="pick_and_place", schedule=ScheduleConfig("exponential", beta1=0.25, beta2=0.25),
+                              seed=seed, epochs=PAPER_EPOCHS), np.zeros(3), complete=False)
+
+
+def test_a_smoke_sweep_stays_out_of_every_200_epoch_row_and_a_configuration_in_progress_is_listed(tmp_path):
+    for name, smoke in (("paper", False), ("both", True)):
+        _paper_and_smoke(tmp_path / name, smoke)
+        assert report_main([str(tmp_path / name), "--out", str(tmp_path / f"{name}_report"), "--smooth", "5"]) == 0
+    for table in ("summary", "aggregate", "permutation_tests"):
+        paper, both = (pd.read_csv(tmp_path / f"{name}_report/tables/{table}.csv") for name in ("paper", "both"))
+        if "total_epochs" in both:
+            assert sorted(both.loc[both["total_epochs"] == 4, "config"]) == ["HER K=4", "linear b1=0.25 K=4"]
+            both = both[both["total_epochs"] == 200]
+        if "task" in both:
+            both = both[both["task"] != "reach"]
+        pd.testing.assert_frame_equal(both.reset_index(drop=True), paper)
+    summary = pd.read_csv(tmp_path / "both_report/tables/summary.csv").set_index(["task", "config"])
+    in_progress = summary.loc[("pick_and_place", "exp b1=0.25 b2=0.25")]
+    assert (in_progress["total_epochs"], in_progress["seeds"], in_progress["in_progress"]) == (200, 0, 2)
+    assert in_progress[["final_median", "auc", "iqm", "p_improve_HER"]].isna().all()
+    page = (tmp_path / "both_report/index.html").read_text(encoding="utf-8")
+    assert "FetchPickAndPlace · exp b1=0.25 b2=0.25: 2 runs, 0 complete, 2 in progress</summary>" in page
