@@ -5,22 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
-from hersd.errors import ConfigError
 from hersd.schedules.base import Schedule, param
-from hersd.schedules.equations import (BETA2_LIMIT, beta1_for_mean_rate, decay_rate, mean_rate_approx,
-                                       mean_rate_exact)
-
-BETA1_DOC = "eq. 9: final drop of the rate, in [0, 1]"
-MEAN_RATE_DOC = "if set, beta1 is solved so that mu_eps over the run's K epochs (eq. 10, exact) is this"
-
-
-def solved_beta1(mean_rate: float, beta2: float, total_epochs: int) -> float:
-    """The beta1 of eq. 9 with mean rate ``mean_rate`` over total_epochs (ConfigError if it exceeds 1)."""
-    beta1 = beta1_for_mean_rate(mean_rate, beta2, total_epochs)
-    if beta1 > 1.0:
-        raise ConfigError(f"schedule.mean_rate={mean_rate} with beta2={beta2} needs beta1={beta1:.3f} > 1; "
-                          "raise mean_rate or lower beta2")
-    return beta1
+from hersd.schedules.equations import BETA2_LIMIT, decay_rate, mean_rate_approx, mean_rate_exact
+from hersd.schedules.linear import BETA1_DOC, MEAN_RATE_DOC, Linear, solved_beta1
 
 
 @dataclass
@@ -42,8 +29,6 @@ class Exponential(Schedule):
 
     def equivalent(self) -> Schedule:
         """beta2 = 0 is the linear kind: its runs are linear runs (the same folder and identity)."""
-        from hersd.schedules.linear import Linear  # linear.py imports this module
-
         return Linear(beta1=self.beta1, mean_rate=self.mean_rate) if self.beta2 == 0 else self
 
     def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:

@@ -5,9 +5,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
+from hersd.errors import ConfigError
 from hersd.schedules.base import Schedule, param
-from hersd.schedules.equations import decay_rate, mean_rate_approx, mean_rate_exact
-from hersd.schedules.exponential import BETA1_DOC, MEAN_RATE_DOC, solved_beta1
+from hersd.schedules.equations import beta1_for_mean_rate, decay_rate, mean_rate_approx, mean_rate_exact
+
+BETA1_DOC = "eq. 9: final drop of the rate, in [0, 1]"
+MEAN_RATE_DOC = "if set, beta1 is solved so that mu_eps over the run's K epochs (eq. 10, exact) is this"
+
+
+def solved_beta1(mean_rate: float, beta2: float, total_epochs: int) -> float:
+    """The beta1 of eq. 9 with mean rate ``mean_rate`` over total_epochs (ConfigError if it exceeds 1)."""
+    beta1 = beta1_for_mean_rate(mean_rate, beta2, total_epochs)
+    if beta1 > 1.0:
+        raise ConfigError(f"schedule.mean_rate={mean_rate} with beta2={beta2} needs beta1={beta1:.3f} > 1; "
+                          "raise mean_rate or lower beta2")
+    return beta1
 
 
 @dataclass
