@@ -15,8 +15,8 @@ from torch import nn
 import hersd.learners.base as base
 from hersd.compose import compose_train
 from hersd.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
-from hersd.learners import learner_class
 from hersd.envs.make import env_spec, make_env
+from hersd.learners import learner_class
 from hersd.run_state import discounting
 from hersd.runlog import read_run
 from hersd.runstore import config_hash, run_identity
