@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from analysis.load import HER_WEIGHTS, config_label
+from analysis.load import HER_WEIGHTS, PAPER_EPOCHS, config_label
 from analysis.metrics import PERMUTATION_RESAMPLES
 from hersd.envs.tasks import task_title
 from hersd.schedules.constant import Constant
@@ -34,7 +34,6 @@ from hersd.schedules.exponential import Exponential
 from hersd.schedules.linear import Linear
 
 ALPHA = 0.05  # the significance level of every verdict
-PAPER_EPOCHS = 200  # K of the paper's runs: the control's rate is linear 0.25's mean over it
 
 HER = config_label(Constant(), *HER_WEIGHTS, mep=False)
 LINEAR_025 = config_label(Linear(beta1=0.25), *HER_WEIGHTS, mep=False)

@@ -574,7 +574,7 @@ def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_
 
 MEAN_RATE_PANELS = ((metrics.RUN_AUC, "AUC: mean raw test success over the K epochs", "AUC"),
                     ("epochs_to_0.5", "first epoch the moving average reaches 0.5 success", "epoch"))
-MEAN_RATE_MARKERS = {"constant": "s", "fixed": "o", "adaptive": "D"}
+MEAN_RATE_MARKERS = {"constant rate": "s", "fixed": "o", "adaptive": "D"}
 DODGE = 0.025  # arms at one mu_eps are drawn side by side, this share of the x axis apart
 
 

@@ -578,7 +578,7 @@ def mean_rate_outcomes(runs: pd.DataFrame, outcomes: pd.DataFrame) -> tuple[pd.D
     complete = runs.loc[runs["complete"], [*GROUP, "run", "seed", "constant_rate", "adaptive", "total_epochs",
                                            "mu_eps"]]
     seeds = complete.merge(outcomes[["run", RUN_AUC, "epochs_to_0.5"]], on="run")
-    kinds = np.where(seeds["constant_rate"].astype(bool), "constant",
+    kinds = np.where(seeds["constant_rate"].astype(bool), "constant rate",
                      np.where(seeds["adaptive"].astype(bool), "adaptive", "fixed"))
     reached = seeds["epochs_to_0.5"].astype(float)
     seeds = seeds.assign(kind=kinds, never=reached.isna(), **{"epochs_to_0.5": reached.fillna(seeds["total_epochs"] + 1.0)})
