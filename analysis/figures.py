@@ -235,7 +235,8 @@ def _draw_curve(axis, medians: pd.DataFrame, in_progress: pd.DataFrame, config: 
     if not curve.empty:
         axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
         axis.plot(curve["epoch"], curve["median"], label=_legend_label(config), **style)
-    for _, run in in_progress[in_progress["config"] == config].groupby("run"):
+    unfinished = in_progress[in_progress["config"] == config]
+    for _, run in unfinished.groupby("run") if not unfinished.empty else ():  # a groupby costs ms, even empty
         axis.plot(run["epoch"], run["smoothed"], color=style["color"], label=_legend_label(config + IN_PROGRESS),
                   **IN_PROGRESS_STYLE)
 

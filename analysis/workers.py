@@ -4,10 +4,13 @@
 core: a forked child starts with the parent's memory (the loaded tables, the imported
 modules), so the jobs themselves are never pickled, only their results. With one core, one
 job, or no ``fork`` on the platform, the jobs run in this process instead, with the same results.
+While the children run, the parent's objects are frozen out of garbage collection (:func:`gc.freeze`): the
+children's collections then skip the parent's many objects (the imported modules' and the tables').
 """
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 from typing import Any, Callable, Sequence
 
@@ -32,6 +35,7 @@ class ForkedMap:
         self._pool = None
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             _JOBS = (function, items)
+            gc.freeze()  # unfrozen in results()
             self._pool = multiprocessing.get_context("fork").Pool(workers)  # the children fork here
             self._pending = self._pool.map_async(_run_job, range(len(items)), chunksize=1)
 
@@ -46,4 +50,5 @@ class ForkedMap:
         finally:
             self._pool.terminate()  # after close(), only reaps; after an error, stops the other jobs
             self._pool.join()
+            gc.unfreeze()
             _JOBS = None
