@@ -25,12 +25,14 @@ def register_schema(name: str, node: Any, group: str | None = None) -> None:
 
 
 def open_schedule(schema: type) -> DictConfig:
-    """A training schema as a config whose ``schedule`` node takes any key: each schedule kind has settings
-    of its own, which the kind's class checks when the config is built (:mod:`hersd.schedules`)."""
+    """A training schema as a config whose ``schedule`` and ``learner`` nodes take any key: each schedule kind and
+    each learner has settings of its own, which its class checks when the config is built (:mod:`hersd.schedules`,
+    :func:`hersd.config.learner_from_config`)."""
     from omegaconf import OmegaConf
 
     node = OmegaConf.structured(schema)
     OmegaConf.set_struct(node.schedule, False)
+    OmegaConf.set_struct(node.learner, False)
     return node
 
 

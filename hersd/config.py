@@ -11,6 +11,7 @@ Every default is the seed paper's appendix setting (which follows the reference 
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
 import pkgutil
@@ -29,7 +30,7 @@ PRECISIONS = ("fp32", "bf16")
 
 
 def learner_names() -> list[str]:
-    """The learner= values: the modules of hersd/learners/ but its base, each holding the learner class of
+    """The package's learner= values: the modules of hersd/learners/ but its base, each holding the learner class of
     that NAME (docs/LEARNERS.md), found without importing them (and torch)."""
     package = importlib.util.find_spec("hersd.learners")
     return sorted(module.name for module in pkgutil.iter_modules(package.submodule_search_locations)
@@ -215,17 +216,81 @@ class SACConfig:
             _check_number("learner.sac.target_entropy", self.target_entropy, -SCALE_LIMIT, SCALE_LIMIT)
 
 
+# The package's first learners and their settings classes, as the classes declare them (``SETTINGS``),
+# known here without importing torch (tests/test_learners.py checks they agree). Any other learner (a module
+# of hersd/learners/, an entry point, learner._target_=<module>.<Class>) is imported to ask its class.
+PACKAGE_LEARNERS: dict[str, Optional[type]] = {"ddpg": None, "td3": TD3Config, "sac": SACConfig}
+LEARNER_TARGET_KEY = "_target_"
+
+
+def learner_key(name: str) -> str:
+    """The config key of a learner's settings, ``learner.<key>.*``: its name, or for a class recorded by its
+    import path, the class name in lower case (``my_pkg.TD3Late`` -> ``td3late``); also its folder's prefix."""
+    return name.rpartition(".")[2].lower() if "." in name else name
+
+
+def learner_settings_class(name: str) -> tuple[str, Optional[type]]:
+    """(the name a run records, the settings dataclass its class declares) of a learner= name or class path."""
+    if name in PACKAGE_LEARNERS:
+        return name, PACKAGE_LEARNERS[name]
+    from hersd.learners.base import learner_class, recorded_name  # imports torch: a learner beyond the three
+
+    cls = learner_class(name)
+    return recorded_name(cls), cls.SETTINGS
+
+
 @dataclass
 class LearnerConfig:
-    # The off-policy learner; all share ddpg.* (networks, optimiser, batch, gamma, polyak once
-    # per cycle, normalisation, target clipping) and every other part of a run.
-    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac: the learner class of that NAME (hersd/learners/)
-    td3: TD3Config = field(default_factory=TD3Config)
-    sac: SACConfig = field(default_factory=SACConfig)
+    """The off-policy learner and its settings: one object, of the dataclass its class declares (``SETTINGS``),
+    the one its ``build`` reads and the run's identity hashes. Every learner also shares ddpg.* (networks,
+    optimiser, batch, gamma, polyak once per cycle, normalisation, target clipping) and every other part of a run."""
+
+    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac | an entry point's name | a class (learner._target_=)
+    settings: Any = None  # learner.<name>.*: its class's SETTINGS; None: that class's defaults (or it has none)
 
     def __post_init__(self) -> None:
-        names = learner_names()
-        _check(self.name in names, f"learner={self.name!r} is unknown; choose one of: {', '.join(names)}")
+        self.name, settings_class = learner_settings_class(self.name)
+        if settings_class is None:
+            _check(self.settings is None, f"learner {self.name} has no settings of its own")
+        elif self.settings is None:
+            self.settings = settings_class()
+        _check(self.settings is None or isinstance(self.settings, settings_class),
+               f"learner {self.name}: its settings must be a {getattr(settings_class, '__name__', None)}")
+
+
+def learner_from_config(node: Any) -> LearnerConfig:
+    """A config's ``learner`` mapping (``name`` or ``_target_``, its settings under ``learner.<key>``, and other
+    package learners' settings, checked and left out) -> its LearnerConfig; ConfigError (one line) otherwise."""
+    if isinstance(node, LearnerConfig):
+        return node
+    sections = dict(node)
+    target, name = sections.pop(LEARNER_TARGET_KEY, None), sections.pop("name", None)
+    _check(not (target and name), f"learner={name} and learner.{LEARNER_TARGET_KEY}={target}: give one of them")
+    name, settings_class = learner_settings_class(target or name or "ddpg")
+    own = sections.pop(learner_key(name), None)
+    for key, section in sections.items():
+        _check(PACKAGE_LEARNERS.get(key) is not None,
+               f"learner.{key} is not a setting of learner {name}; its settings: learner.{learner_key(name)}.*")
+        learner_settings(key, PACKAGE_LEARNERS[key], section)
+    _check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
+    return LearnerConfig(name, learner_settings(learner_key(name), settings_class, own or {}) if settings_class else None)
+
+
+def learner_settings(key: str, settings_class: type, section: Any) -> Any:
+    """``settings_class(**section)``; ConfigError (one line) for a key it lacks or a section that is no mapping."""
+    fields = [item.name for item in dataclasses.fields(settings_class)]
+    _check(isinstance(section, dict), f"learner.{key} must hold settings ({', '.join(fields)}), got {section!r}")
+    unknown = sorted(set(section) - set(fields))
+    _check(not unknown, f"learner.{key}.{unknown[0] if unknown else ''} is not a setting; "
+           f"its settings: {', '.join(fields) or 'none'}")
+    return settings_class(**section)
+
+
+def learner_record(learner: LearnerConfig) -> dict[str, Any]:
+    """The learner as a log's config holds it and the run's identity hashes it: ``name`` and its settings
+    under that name (none for a learner without settings)."""
+    own = {} if learner.settings is None else {learner.name: dataclasses.asdict(learner.settings)}
+    return {"name": learner.name, **own}
 
 
 @dataclass
@@ -259,7 +324,9 @@ class TrainConfig:
     # (hersd-train --help lists them); a hersd.schedules.Schedule once the config is built. {}: HER's constant.
     schedule: Any = field(default_factory=dict)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
-    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    # The learner: learner=<name> (or learner._target_=<module>.<Class>) and its settings, learner.<name>.*
+    # (docs/LEARNERS.md); a LearnerConfig once the config is built. {}: DDPG, the paper's.
+    learner: Any = field(default_factory=dict)
     bias: BiasConfig = field(default_factory=BiasConfig)
     seed: int = 0  # one seed, one result (every RNG is derived from it)
     epochs: int = 200  # K in eq. 9 (the paper trains 200 epochs)
@@ -299,6 +366,7 @@ class TrainConfig:
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
         _check(self.precision in PRECISIONS, f"precision must be fp32 or bf16, got {self.precision!r}")
         self.task.resolve()
+        self.learner = learner_from_config(self.learner)
         if isinstance(self.schedule, Schedule):
             self.schedule = settle(self.schedule, self.epochs)
         else:
@@ -308,7 +376,7 @@ class TrainConfig:
 def config_record(cfg: TrainConfig) -> dict[str, Any]:
     """The config as a nested dict, as a log's ``/run/meta`` holds it: the schedule as its record
     (:meth:`hersd.schedules.Schedule.record`)."""
-    return {**asdict(cfg), "schedule": cfg.schedule.record()}
+    return {**asdict(cfg), "schedule": cfg.schedule.record(), "learner": learner_record(cfg.learner)}
 
 
 def to_train_config(cfg: DictConfig) -> TrainConfig:

@@ -1,7 +1,7 @@
 """The run store: where a run lives and what state it is in, shared by training, sweeps and
 the search. Light (no torch): a sweep plans hundreds of runs with it.
 
-``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` (``<learner>-<algo>`` for td3 and sac) holds
+``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` (``<learner>-<algo>`` for learners but ddpg) holds
 
 - ``run.mcap``        the run's log (:mod:`hersd.runlog`), the contract with the analysis;
 - ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.run_state`), removed when done;
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from hersd.config import ConfigError, TrainConfig, config_record
+from hersd.config import ConfigError, TrainConfig, config_record, learner_key
 from hersd.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 
 CHECKPOINT_NAME = "checkpoint.pt"
@@ -50,8 +50,8 @@ class RunLockedError(RuntimeError):
 
 def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     """What identifies a run: its config as a nested dict, less :data:`NOT_HASHED` and the
-    :data:`HASHED_UNLESS` defaults; of ``learner`` only the learner in use and its own settings,
-    and nothing for ddpg (the learner of every run made before learners were a setting).
+    :data:`HASHED_UNLESS` defaults; of ``learner`` only the learner in use and its settings (the one object
+    its class declares and its ``build`` reads, :class:`hersd.config.LearnerConfig`), and nothing for ddpg (the learner of every run made before learners were a setting).
 
     ``config`` is a TrainConfig or its dict as a log's ``/run/meta`` holds it; a log written
     before a field existed has the identity of a new log of the same run.
@@ -59,8 +59,9 @@ def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     content = config_record(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
     content = {key: value for key, value in content.items() if key not in NOT_HASHED}
     learner = content.pop("learner", {"name": "ddpg"})
-    if learner["name"] != "ddpg":
-        content["learner"] = {"name": learner["name"], learner["name"]: learner[learner["name"]]}
+    name = learner["name"]
+    if name != "ddpg":  # a learner's settings are one object, under its name (hersd.config.learner_record)
+        content["learner"] = {"name": name, **({name: learner[name]} if name in learner else {})}
     for dotted, earlier_value in HASHED_UNLESS.items():
         *parents, leaf = dotted.split(".")
         node = content
@@ -80,7 +81,7 @@ def run_dir(cfg: TrainConfig) -> Path:
     """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
     if cfg.run_dir is not None:
         return Path(cfg.run_dir)
-    algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{cfg.learner.name}-{cfg.algo.name}"
+    algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{learner_key(cfg.learner.name)}-{cfg.algo.name}"
     return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{config_hash(cfg)}"
 
 

@@ -43,7 +43,7 @@ def tiny_learner(name: str = "ddpg", max_action: float = 1.0, seed: int = 0,
 
     learner = LearnerConfig(name=name)
     if settings:
-        setattr(learner, name, type(getattr(learner, name))(**settings))
+        learner.settings = type(learner.settings)(**settings)
     cfg = TrainConfig(ddpg=DDPGConfig(hidden_layers=2, hidden_units=16, **(ddpg or {})), learner=learner)
     torch.manual_seed(seed)
     agent = learner_class(name).build(cfg, tiny_spec(max_action), 0.98, q_range, torch.device("cpu"))

@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
+import importlib
 from functools import reduce
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, NamedTuple, Optional
 
@@ -42,13 +45,41 @@ if TYPE_CHECKING:
     from hersd.envs.make import EnvSpec
 
 LEARNERS: dict[str, type["GoalConditionedLearner"]] = {}  # learner= name -> class, filled as classes are defined
+ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
 TWIN_CRITICS = ("critic", "critic2")  # TD3's and SAC's critics: the target takes their minimum
 BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")  # /proc/cpuinfo flags of bf16 instructions (x86; Arm's bf16)
 
 
 def learner_class(name: str) -> type["GoalConditionedLearner"]:
-    """The learner class of ``learner=name`` (the package :mod:`hersd.learners` imports every learner's module)."""
-    return LEARNERS[name]
+    """The learner class of ``learner=name``: the package's (:mod:`hersd.learners` imports every learner's module)
+    and any class registered by its ``NAME``, an entry point of the group ``hersd.learners``, or a class by its
+    import path ``<module>.<Class>`` (``learner._target_``); ConfigError (one line) if none."""
+    import hersd.learners  # noqa: F401 - registers the package's learners
+
+    cls = LEARNERS.get(name)
+    if cls is None and (found := entry_points(group=ENTRY_POINT_GROUP, name=name)):
+        cls = next(iter(found)).load()
+    if cls is None and "." in name:
+        module, _, class_name = name.rpartition(".")
+        try:
+            cls = getattr(importlib.import_module(module), class_name)
+        except (ImportError, AttributeError) as err:
+            raise ConfigError(f"learner class {name} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+    if cls is None:
+        known = sorted({*LEARNERS, *(point.name for point in entry_points(group=ENTRY_POINT_GROUP))})
+        raise ConfigError(f"learner={name!r} is unknown; choose one of: {', '.join(known)}, "
+                          "or a class: learner._target_=<module>.<Class>")
+    if not (isinstance(cls, type) and issubclass(cls, GoalConditionedLearner)):
+        raise ConfigError(f"learner {name} is not a hersd.learners.GoalConditionedLearner subclass")
+    if cls.SETTINGS is not None and not dataclasses.is_dataclass(cls.SETTINGS):
+        raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {cls.SETTINGS!r}")
+    return cls
+
+
+def recorded_name(cls: type["GoalConditionedLearner"]) -> str:
+    """The name a learner class's runs record (``learner.name`` of their logs): the ``NAME`` it declares itself
+    (not one it inherits: a subclass of TD3 is not TD3), else its import path."""
+    return cls.__dict__.get("NAME") or f"{cls.__module__}.{cls.__qualname__}"
 
 
 class RunningNormalizer:
@@ -163,6 +194,10 @@ class GoalConditionedLearner:
     builds its optimisers after calling this constructor and defines ``build``, ``act`` and ``update``."""
 
     NAME: ClassVar[str]  # learner=NAME selects the class; set in a class body, it registers the class
+    # Its settings, learner.<name>.*: a dataclass whose fields are the settings (range checks in __post_init__,
+    # ConfigError), or None. The config holds one object of it (cfg.learner.settings): the one build reads, the
+    # one the run's identity hashes. A subclass inherits it, under its own name.
+    SETTINGS: ClassVar[Optional[type]] = None
     CRITICS: ClassVar[tuple[str, ...]] = ("critic",)  # the critics among the networks; the first is the one reported
     TARGETS: ClassVar[tuple[str, ...]] = ()  # networks with a target copy <name>_target, moved by update_targets
     PARTS: ClassVar[tuple[str, ...]] = ()  # attributes with state_dict/load_state_dict: the checkpoint's keys

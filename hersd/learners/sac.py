@@ -39,6 +39,7 @@ class SAC(GoalConditionedLearner):
     """A squashed-Gaussian actor, twin critics and a learnt temperature, on the shared input normalisers."""
 
     NAME = "sac"
+    SETTINGS = SACConfig
     CRITICS = TWIN_CRITICS
     TARGETS = CRITICS  # no actor target
     PARTS = ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",
@@ -50,7 +51,7 @@ class SAC(GoalConditionedLearner):
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
               device: torch.device) -> "SAC":
-        return cls(cfg.ddpg, cfg.learner.sac, spec, gamma, device, cfg.precision)  # q_range: not SAC's bound (target_q)
+        return cls(cfg.ddpg, cfg.learner.settings, spec, gamma, device, cfg.precision)  # q_range: not SAC's bound (target_q)
 
     @classmethod
     def networks(cls, spec: "EnvSpec") -> dict[str, tuple[int, int]]:

@@ -32,6 +32,7 @@ class TD3(DDPG):
     """DDPG with twin critics, smoothed target actions and delayed actor steps."""
 
     NAME = "td3"
+    SETTINGS = TD3Config
     CRITICS = TWIN_CRITICS
     TARGETS = ("actor", "critic", "critic2")
     PARTS = DDPG.PARTS + ("critic2", "critic2_target")  # + "counters" (the delay's phase), below
@@ -40,7 +41,7 @@ class TD3(DDPG):
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
               device: torch.device) -> "TD3":
-        return cls(cfg.ddpg, cfg.learner.td3, spec, gamma, q_range, device, cfg.precision)
+        return cls(cfg.ddpg, cfg.learner.settings, spec, gamma, q_range, device, cfg.precision)
 
     def __init__(self, cfg: DDPGConfig, td3: TD3Config, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
                  device: torch.device = torch.device("cpu"), precision: str = "fp32"):
