@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from hersd.compose import compose_train, explain_config_error, group_options
-from hersd.config import ConfigError, TrainConfig
+from hersd.config import PACKAGE_LEARNERS, ConfigError, TrainConfig
 from hersd.schedules import TARGET_KEY, known_kinds, schedule_class
 from hersd.runstore import RunLockedError, check_writable, run_dir
 
@@ -50,6 +50,10 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
         if item.name == "schedule":
             lines.append(f"  {prefix}schedule.kind={value.kind}".ljust(34) + "  the schedule (below), or "
                          f"schedule.{TARGET_KEY}=<module>.<Class>: a hersd.schedules.Schedule of your own")
+        elif item.name == "learner":  # its name, then each package learner's settings (docs/LEARNERS.md)
+            lines.append(f"  {prefix}learner.name={value.name}".ljust(34) + f"  {docs.get(item.name, '')}")
+            for name, settings in PACKAGE_LEARNERS.items():
+                lines += schema_lines(settings, f"{prefix}learner.{name}.") if settings else []
         elif dataclasses.is_dataclass(value):
             lines += schema_lines(type(value), f"{prefix}{item.name}.")
         else:

@@ -324,8 +324,7 @@ class TrainConfig:
     # (hersd-train --help lists them); a hersd.schedules.Schedule once the config is built. {}: HER's constant.
     schedule: Any = field(default_factory=dict)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
-    # The learner: learner=<name> (or learner._target_=<module>.<Class>) and its settings, learner.<name>.*
-    # (docs/LEARNERS.md); a LearnerConfig once the config is built. {}: DDPG, the paper's.
+    # The learner: learner=<name> or learner._target_=<module>.<Class>, its settings learner.<name>.* (docs/LEARNERS.md)
     learner: Any = field(default_factory=dict)
     bias: BiasConfig = field(default_factory=BiasConfig)
     seed: int = 0  # one seed, one result (every RNG is derived from it)
