@@ -1,6 +1,7 @@
 """The learners (docs/LEARNERS.md): one module per learner, each a class that declares what the run
 asks of it (:mod:`hersd.learners.base`). Importing this package imports every module in it, so every
-learner class is registered under its ``NAME``: :func:`learner_class` finds it by ``learner=``.
+learner class is registered under its ``NAME``: :func:`learner_class` finds it by ``learner=``, as it finds
+an entry point's (group ``hersd.learners``) or a class by its path (``learner._target_``).
 """
 
 from __future__ import annotations

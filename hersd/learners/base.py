@@ -1,10 +1,13 @@
 """What every learner shares, and what the rest of a run asks of a learner.
 
-A learner is a subclass of :class:`GoalConditionedLearner` in a module of this package. Its class
+A learner is a subclass of :class:`GoalConditionedLearner`, in a module of this package or anywhere
+(an entry point of the group ``hersd.learners``, or ``learner._target_=<module>.<Class>``). Its class
 declares everything the run needs to know about it, and nothing outside the learner's own module
 names it (:mod:`hersd.run_state` and :mod:`hersd.train` look it up by name, :func:`learner_class`):
 
-- ``NAME``: the value of ``learner=`` that selects it; defining it registers the class;
+- ``NAME``: the value of ``learner.name`` that selects it; defining it registers the class;
+- ``SETTINGS``: its settings dataclass; the config holds one object of it, the one ``build`` reads and
+  the run's identity hashes (:class:`hersd.config.LearnerConfig`);
 - :meth:`~GoalConditionedLearner.build`: the learner of a run from its config, env spec, discount,
   target range and device;
 - :meth:`~GoalConditionedLearner.networks`, ``CRITICS``, ``TARGETS``: its networks (name -> input
