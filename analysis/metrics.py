@@ -18,7 +18,7 @@ import json
 import math
 import warnings
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
@@ -621,14 +621,28 @@ class Analysis:
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
     """Compute every table the report needs; runs in progress enter none of them (only ``curves``)."""
+    return with_statistics(analyse_curves(runs, epochs, window), seed=seed)
+
+
+def analyse_curves(runs: pd.DataFrame, epochs: pd.DataFrame, window: int) -> Analysis:
+    """What the figures draw (curves, medians, shares, q_means, outcomes); the statistics tables (summary,
+    aggregate, composition_vs_paper, tests, equal_mu_tests) empty until :func:`with_statistics` (the report
+    computes them while worker processes draw)."""
     curves = smoothed_curves(epochs, window)
-    complete_curves, complete_epochs = curves[curves["complete"]], epochs[epochs["complete"]]
-    shares = composition(complete_epochs)
-    outcomes = run_outcomes(curves)
-    return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(complete_curves),
-                    summary=summary_table(complete_curves, runs, seed=seed),
-                    aggregate=aggregate_table(complete_curves, runs, seed=seed), shares=shares,
-                    q_means=mean_q(complete_epochs),
-                    composition_vs_paper=composition_versus_paper(shares, runs[runs["complete"]]), window=window,
-                    outcomes=outcomes, tests=permutation_tests(runs, outcomes, seed=seed),
-                    equal_mu_tests=equal_mu_tests(runs, outcomes, curves, seed=seed))
+    complete_epochs = epochs[epochs["complete"]]
+    empty = pd.DataFrame()
+    return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(curves[curves["complete"]]),
+                    summary=empty, aggregate=empty, shares=composition(complete_epochs),
+                    q_means=mean_q(complete_epochs), composition_vs_paper=empty, window=window,
+                    outcomes=run_outcomes(curves), tests=empty, equal_mu_tests=empty)
+
+
+def with_statistics(analysis: Analysis, seed: int = BOOTSTRAP_SEED) -> Analysis:
+    """``analysis`` (:func:`analyse_curves`) with its statistics tables computed."""
+    runs, curves, outcomes = analysis.runs, analysis.curves, analysis.outcomes
+    complete_curves = curves[curves["complete"]]
+    return replace(analysis, summary=summary_table(complete_curves, runs, seed=seed),
+                   aggregate=aggregate_table(complete_curves, runs, seed=seed),
+                   composition_vs_paper=composition_versus_paper(analysis.shares, runs[runs["complete"]]),
+                   tests=permutation_tests(runs, outcomes, seed=seed),
+                   equal_mu_tests=equal_mu_tests(runs, outcomes, curves, seed=seed))

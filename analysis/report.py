@@ -16,7 +16,8 @@ Output (``<FOLDER>/report`` unless ``--out``)::
 
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
 are read, and the figures drawn, in worker processes, one per core (analysis.workers); the
-modules that compute and draw (scipy, matplotlib) are imported while the logs are read.
+modules that compute and draw (scipy, matplotlib) are imported while the logs are read, and the statistics
+and table files are computed and written while the figures are drawn.
 """
 
 from __future__ import annotations
@@ -138,8 +139,10 @@ PAGE_STYLE = ("body{font-family:sans-serif;max-width:1400px;margin:auto;padding:
 
 @dataclass
 class ReportResult:
-    """What a report run wrote, and the seconds spent per stage: load (which includes ``imports``,
-    done while worker processes read the logs when there are many), metrics, figures, writing."""
+    """What a report run wrote, and the wall seconds of its stages, one after another: load (which includes
+    ``imports``, done while worker processes read the logs when there are many), metrics (the curves the figures
+    draw), figures (from the first figure's drawing to the last's; it includes ``statistics`` and ``tables``,
+    the statistics tables computed and the table files written meanwhile), writing (the page)."""
 
     index: Path
     figures: list[Path]
@@ -404,13 +407,13 @@ def _load(folder: Path, tasks, algos, timings: dict[str, float]) -> RunTable:
     return table
 
 
-def _draw(figures: list[ReportFigure], folders: list[Path], fmt: str) -> tuple[list[Path], list[str]]:
-    """Draw and save every figure (``figures[i]`` into ``folders[i]``), one worker process per core
-    -> (the files, the ``<img>`` of each)."""
+def _start_drawing(figures: list[ReportFigure], folders: list[Path], fmt: str) -> tuple[list[Path], ForkedMap]:
+    """Start drawing and saving every figure (``figures[i]`` into ``folders[i]``), one worker process per core
+    -> (the files, the ForkedMap whose ``results()`` are the ``<img>`` of each)."""
     paths = [folder / f"{figure.name}.{fmt}" for figure, folder in zip(figures, folders)]
     for folder in set(folders):
         folder.mkdir(parents=True, exist_ok=True)
-    return paths, ForkedMap(_render, [(figure, path, fmt) for figure, path in zip(figures, paths)]).results()
+    return paths, ForkedMap(_render, [(figure, path, fmt) for figure, path in zip(figures, paths)])
 
 
 def _critic_tests(epochs: pd.DataFrame) -> pd.DataFrame:
@@ -427,6 +430,18 @@ def _analysis_tables(analysis: Analysis) -> dict[str, pd.DataFrame]:
               f"composition_{PAPER_COMPOSITION_EPOCH}": analysis.composition_vs_paper,
               "permutation_tests": analysis.tests, "equal_mu_tests": analysis.equal_mu_tests}
     return {name: table for name, table in tables.items() if name in ("summary", "aggregate") or not table.empty}
+
+
+def _report_tables(table: RunTable, analysis: Analysis) -> tuple[dict[str, pd.DataFrame], pd.DataFrame, pd.DataFrame]:
+    """Every table of the report by file stem but the run list, and the critic's bias tests and the claims
+    (maybe empty) -> (tables, critic tests, claims)."""
+    tables = _analysis_tables(analysis)
+    if not (critic_tests := _critic_tests(table.epochs)).empty:
+        tables["critic_bias_tests"] = critic_tests
+    if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
+        tables["claims"] = claims
+    tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
+    return tables, critic_tests, claims
 
 
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
@@ -460,28 +475,27 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         warn(f"warning: skipped study storage {line}")
 
     from analysis.figures import all_figures
-    from analysis.metrics import analyse
+    from analysis.metrics import analyse_curves, with_statistics
 
     start = time.perf_counter()
-    analysis = analyse(runs, table.epochs, window)
+    analysis = analyse_curves(runs, table.epochs, window)
+    figures, study_figures = all_figures(analysis), _study_figures(studies)
+    folders = [out / "figures"] * len(figures) + [out / "search"] * len(study_figures)
     timings["metrics"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    figures, study_figures = all_figures(analysis), _study_figures(studies)
-    folders = [out / "figures"] * len(figures) + [out / "search"] * len(study_figures)
-    paths, images = _draw(figures + study_figures, folders, fmt)
+    paths, drawing = _start_drawing(figures + study_figures, folders, fmt)
+    analysis = with_statistics(analysis)  # while the workers draw
+    timings["statistics"] = time.perf_counter() - start
+    tables, critic_tests, claims = _report_tables(table, analysis)
+    written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
+    written += _write_studies(studies, out / "search")
+    timings["tables"] = time.perf_counter() - start - timings["statistics"]
+    images = drawing.results()
     timings["figures"] = time.perf_counter() - start
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 
     start = time.perf_counter()
-    tables = _analysis_tables(analysis)
-    if not (critic_tests := _critic_tests(table.epochs)).empty:
-        tables["critic_bias_tests"] = critic_tests
-    if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
-        tables["claims"] = claims
-    tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
-    written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
-    written += _write_studies(studies, out / "search")
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
@@ -520,8 +534,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     timings = result.timings
     print(f"report written to {result.index} (load {timings['load']:.1f} s incl. imports {timings['imports']:.1f} s, "
-          f"metrics {timings['metrics']:.1f} s, figures {timings['figures']:.1f} s, "
-          f"writing {timings['writing']:.1f} s)")
+          f"metrics {timings['metrics']:.1f} s, figures {timings['figures']:.1f} s (meanwhile statistics "
+          f"{timings['statistics']:.1f} s, tables {timings['tables']:.1f} s), writing {timings['writing']:.1f} s)")
     return 0
 
 

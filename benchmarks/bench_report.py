@@ -5,12 +5,13 @@
 Runs ``python -m analysis.report FOLDER`` (what the ``hersd-report`` script runs) in a fresh
 interpreter, as a user would, and prints its wall and CPU seconds (CPU: the report and its
 worker processes) and the split: interpreter start and ``import analysis.report`` (timed
-alone in another fresh interpreter), then the stages the report prints (load, including the
-imports of scipy and matplotlib done while worker processes read the logs; metrics; figures;
-writing). ``--repeat N``
-runs it N times and judges the fastest (the others show how much a busy machine slows it).
-Fails (exit 1) when it takes 8 s or more of wall-clock time. The logs are written with
-RunLogWriter in a temporary folder (not timed), or in ``--keep DIR`` to look at them after.
+alone in another fresh interpreter), then the stages the report prints, one after another (load,
+including the imports of scipy and matplotlib done while worker processes read the logs; metrics: the
+curves; figures, drawn by worker processes while the report computes the statistics and writes the
+table files, both timed inside it; writing: the page). ``--repeat N`` runs it N times and judges
+the fastest (the others show how much a busy machine slows it). Fails (exit 1) when it takes 8 s or
+more of wall-clock time. The logs are written with RunLogWriter in a temporary folder (not timed), or
+in ``--keep DIR`` to look at them after.
 """
 
 from __future__ import annotations
