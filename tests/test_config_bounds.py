@@ -17,7 +17,7 @@ import hersd.run_state
 import hersd.train
 from hersd.cli import main
 from hersd.compose import compose_train
-from hersd.config import (AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
+from hersd.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
                           TD3Config, TrainConfig)
 from hersd.envs.make import EnvSpec
 from hersd.runlog import read_run
@@ -113,7 +113,8 @@ def _numeric_fields(schema: type, prefix: str = "") -> list[str]:
 
 def test_the_table_covers_every_numeric_setting_with_a_refused_value():
     schedules = {f"schedule.{item.name}" for cls in SCHEDULES.values() for item in cls.params() if "low" in item.metadata}
-    fields = _numeric_fields(TrainConfig) + sorted(schedules)
+    learners = [field for name, cls in PACKAGE_LEARNERS.items() if cls for field in _numeric_fields(cls, f"learner.{name}.")]
+    fields = _numeric_fields(TrainConfig) + sorted(schedules) + learners
     assert sorted(fields) == sorted(TABLE)
     assert all(TABLE[field][0] for field in fields)
 
