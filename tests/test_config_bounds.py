@@ -72,6 +72,7 @@ TABLE: dict[str, tuple[list, list]] = {
     "learner.sac.target_entropy": ([-1.1e6, 1.1e6, -HUGE, HUGE, INF, -INF, NAN], [-1e6, 0.0, 1e6, None]),
     "bias.epochs": ([[0], [-1], [1, 0]], [[], [1], [1, 2, 200]]),
     "bias.episodes": COUNT, "bias.return_steps": COUNT, "bias.hindsight_pairs": ([-1], [0, 1]),
+    "bias.moved_pairs": ([-1], [0, 1]),
     "seed": ([-1], [0, BIG_INT]), "epochs": COUNT, "checkpoint_every": ([-1], [0, BIG_INT]),
     "render_every": ([-1], [0, BIG_INT]),
     "threads": (["0", "1025", "-1", "1e3"], ["auto", "1", "1024"]),

@@ -7,8 +7,8 @@ Its methods give the rate of epoch k of K, the exact mean rate (None when it ada
 run), the folder tag and the report's label (both by default from the class name and its settings),
 the kind it equals (:meth:`Schedule.equivalent`) and the record logs keep (the run's identity).
 Every rate must lie in [0, 1]: a fixed schedule's are checked when its config is built
-(:func:`settle`), an adaptive one's at each epoch (:meth:`Schedule.checked_rate`), one
-:class:`ScheduleRateError` line naming the epoch. Imports neither torch nor the config: every layer can use it.
+(:func:`settle`, its first CHECKED_UP_FRONT epochs), every schedule's at each epoch
+(:meth:`Schedule.checked_rate`), one :class:`ScheduleRateError` line naming the epoch. Imports neither torch nor the config: every layer can use it.
 """
 
 from __future__ import annotations
@@ -142,12 +142,15 @@ def shown_value(value: Any) -> str:
     return "null" if value is None else str(value)
 
 
+CHECKED_UP_FRONT = 100_000  # a fixed schedule's epochs checked before any work; later ones at their epoch
+
+
 def check_rates(schedule: Schedule, total_epochs: int) -> None:
     """ScheduleRateError (one line) unless a fixed schedule's rate of every epoch 1..total_epochs is in [0, 1]
-    (or if computing one raises)."""
+    (or if computing one raises); past CHECKED_UP_FRONT epochs, training checks each at its epoch."""
     if schedule.adaptive:
         return
-    for k in range(1, total_epochs + 1):
+    for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1):
         try:
             schedule.checked_rate(k, total_epochs)
         except ScheduleRateError:
