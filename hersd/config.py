@@ -21,6 +21,7 @@ from typing import Any, List, Optional
 from omegaconf import DictConfig, OmegaConf
 
 from hersd.errors import ConfigError
+from hersd.learner_registry import learner_class, recorded_name
 from hersd.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
 from hersd.envs.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
@@ -233,9 +234,7 @@ def learner_settings_class(name: str) -> tuple[str, Optional[type]]:
     """(the name a run records, the settings dataclass its class declares) of a learner= name or class path."""
     if name in PACKAGE_LEARNERS:
         return name, PACKAGE_LEARNERS[name]
-    from hersd.learners.base import learner_class, recorded_name  # imports torch: a learner beyond the three
-
-    cls = learner_class(name)
+    cls = learner_class(name, known=tuple(PACKAGE_LEARNERS))  # imports the class's module (and torch)
     return recorded_name(cls), cls.SETTINGS
 
 

@@ -3,6 +3,7 @@ learners and their batches, a run's metrics, a command in a fresh interpreter. F
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -79,3 +80,13 @@ def run_command(module_main: str, *args: str, check: bool = False, timeout: floa
     code = f"import sys; from {module} import {function}; sys.exit({function}())"
     return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=check,
                           timeout=timeout, cwd=cwd)
+
+
+def command(module_main: str, args: list[str], module_dir: Path) -> subprocess.CompletedProcess:
+    """A command's entry point in a fresh interpreter with ``module_dir`` on PYTHONPATH."""
+    module, function = module_main.split(":")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(module_dir), os.environ.get("PYTHONPATH", "")])}
+    code = f"import sys; from {module} import {function}; sys.exit({function}())"
+    result = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=600, env=env)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    return result

@@ -12,6 +12,7 @@ import torch
 from helpers import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
 from hersd.compose import compose_train
+from hersd import learner_registry
 from hersd.config import learner_names
 from hersd.learners import LEARNERS
 from hersd.runlog import read_run
@@ -71,7 +72,7 @@ def test_a_new_learner_is_one_class_the_run_asks(monkeypatch):
     from hersd.learners.ddpg import DDPG
     from hersd.train import NonFiniteLossError, check_finite
 
-    monkeypatch.setattr(learners.base, "LEARNERS", dict(learners.base.LEARNERS))
+    monkeypatch.setattr(learner_registry, "LEARNERS", dict(learner_registry.LEARNERS))
 
     class Quiet(DDPG):
         NAME = "quiet"

@@ -9,8 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from helpers import TINY
-from test_user_schedule import command
+from helpers import TINY, command
 
 from hersd.runlog import read_run
 

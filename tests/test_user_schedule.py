@@ -4,12 +4,9 @@ on PYTHONPATH; and by an entry point of the group ``hersd.schedules``."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
-from helpers import TINY
+from helpers import TINY, command
 
 from hersd.runlog import read_run
 
@@ -43,16 +40,6 @@ class Step(Schedule):
 class RegisteredStep(Step):
     kind = "step"
 '''
-
-
-def command(module_main: str, args: list[str], module_dir: Path) -> subprocess.CompletedProcess:
-    """A command's entry point in a fresh interpreter with ``module_dir`` on PYTHONPATH."""
-    module, function = module_main.split(":")
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(module_dir), os.environ.get("PYTHONPATH", "")])}
-    code = f"import sys; from {module} import {function}; sys.exit({function}())"
-    result = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=600, env=env)
-    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
-    return result
 
 
 def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(tmp_path):

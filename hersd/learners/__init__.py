@@ -9,7 +9,8 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from hersd.learners.base import LEARNERS, GoalConditionedLearner, UpdateStats, learner_class
+from hersd.learner_registry import LEARNERS
+from hersd.learners.base import GoalConditionedLearner, UpdateStats, learner_class
 
 __all__ = ["LEARNERS", "GoalConditionedLearner", "UpdateStats", "learner_class"]
 

@@ -41,48 +41,25 @@ import numpy as np
 import torch
 from torch import nn
 
-from hersd.config import ConfigError, DDPGConfig, TrainConfig
+from hersd import learner_registry as registry
+from hersd.config import DDPGConfig, TrainConfig
+from hersd.errors import ConfigError
 from hersd.replay.buffer import TransitionBatch
 
 if TYPE_CHECKING:
     from hersd.envs.make import EnvSpec
 
-LEARNERS: dict[str, type["GoalConditionedLearner"]] = {}  # learner= name -> class, filled as classes are defined
-ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
 TWIN_CRITICS = ("critic", "critic2")  # TD3's and SAC's critics: the target takes their minimum
 BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")  # /proc/cpuinfo flags of bf16 instructions (x86; Arm's bf16)
 
 
 def learner_class(name: str) -> type["GoalConditionedLearner"]:
-    """The learner class of ``learner=name``: the package's (:mod:`hersd.learners` imports every learner's module)
-    and any class registered by its ``NAME``, an entry point of the group ``hersd.learners``, or a class by its
-    import path ``<module>.<Class>`` (``learner._target_``); ConfigError (one line) if none."""
-    import hersd.learners  # noqa: F401 - registers the package's learners
-
-    cls = LEARNERS.get(name)
-    if cls is None and (found := entry_points(group=ENTRY_POINT_GROUP, name=name)):
-        cls = next(iter(found)).load()
-    if cls is None and "." in name:
-        module, _, class_name = name.rpartition(".")
-        try:
-            cls = getattr(importlib.import_module(module), class_name)
-        except (ImportError, AttributeError) as err:
-            raise ConfigError(f"learner class {name} cannot be imported ({err}); is its module on PYTHONPATH?") from None
-    if cls is None:
-        known = sorted({*LEARNERS, *(point.name for point in entry_points(group=ENTRY_POINT_GROUP))})
-        raise ConfigError(f"learner={name!r} is unknown; choose one of: {', '.join(known)}, "
-                          "or a class: learner._target_=<module>.<Class>")
-    if not (isinstance(cls, type) and issubclass(cls, GoalConditionedLearner)):
+    """The learner class of ``learner=name`` (:func:`hersd.learner_registry.learner_class`), checked to be a
+    :class:`GoalConditionedLearner`; ConfigError (one line) otherwise."""
+    cls = registry.learner_class(name)  # the package's are registered: hersd.learners imported this module
+    if not issubclass(cls, GoalConditionedLearner):
         raise ConfigError(f"learner {name} is not a hersd.learners.GoalConditionedLearner subclass")
-    if cls.SETTINGS is not None and not dataclasses.is_dataclass(cls.SETTINGS):
-        raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {cls.SETTINGS!r}")
     return cls
-
-
-def recorded_name(cls: type["GoalConditionedLearner"]) -> str:
-    """The name a learner class's runs record (``learner.name`` of their logs): the ``NAME`` it declares itself
-    (not one it inherits: a subclass of TD3 is not TD3), else its import path."""
-    return cls.__dict__.get("NAME") or f"{cls.__module__}.{cls.__qualname__}"
 
 
 class RunningNormalizer:
@@ -211,9 +188,10 @@ class GoalConditionedLearner:
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
         if "NAME" in cls.__dict__:
-            if cls.NAME in LEARNERS:
-                raise TypeError(f"two learners named {cls.NAME!r}: {LEARNERS[cls.NAME].__name__} and {cls.__name__}")
-            LEARNERS[cls.NAME] = cls
+            if cls.NAME in registry.LEARNERS:
+                raise TypeError(f"two learners named {cls.NAME!r}: {registry.LEARNERS[cls.NAME].__name__} and "
+                                f"{cls.__name__}")
+            registry.LEARNERS[cls.NAME] = cls
 
     @classmethod
     def build(cls, cfg: TrainConfig, spec: "EnvSpec", gamma: float, q_range: tuple[float, float],
