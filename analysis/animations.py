@@ -3,7 +3,7 @@ median final success, side by side at matched epochs (one row per epoch, up to M
 placed after the task's learning curves.
 
 Training (``render_every``) and ``hersd-render`` write ``<run dir>/policy/epoch_<k>.gif``
-(:meth:`hersd.runstore.RunFolder.animations` finds them); this module only finds, chooses and places
+(:meth:`hersd.contract.runstore.RunFolder.animations` finds them); this module only finds, chooses and places
 those files: it renders nothing and needs neither torch nor MuJoCo.
 """
 
@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics import Analysis, final_success
-from hersd.runstore import RunFolder
-from hersd.envs.tasks import task_title
+from hersd.contract.runstore import RunFolder
+from hersd.contract.tasks import task_title
 
 FOLDER = "animations"  # below the report's figures/ folder
 MAX_EPOCHS_SHOWN = 4  # rows of a task's block: the paper's 200 epochs rendered every 50 give 50, 100, 150, 200

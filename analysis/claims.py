@@ -28,10 +28,10 @@ import pandas as pd
 
 from analysis.load import HER_WEIGHTS, PAPER_EPOCHS, config_label
 from analysis.metrics import PERMUTATION_RESAMPLES
-from hersd.envs.tasks import task_title
-from hersd.schedules.constant import Constant
-from hersd.schedules.exponential import Exponential
-from hersd.schedules.linear import Linear
+from hersd.contract.tasks import task_title
+from hersd.contract.schedules.constant import Constant
+from hersd.contract.schedules.exponential import Exponential
+from hersd.contract.schedules.linear import Linear
 
 ALPHA = 0.05  # the significance level of every verdict
 

@@ -2,7 +2,7 @@
 
 - :func:`critic_curves`: per (task, config, epoch), the median over seeds and the quartiles of
   each :data:`CRITIC_COLUMNS` field (the bias of Q against the policy's true return, for real and
-  hindsight goals and hindsight goals the object was moved to, hersd/bias.py; the mean Q of real-goal and relabelled training rows);
+  hindsight goals and hindsight goals the object was moved to, hersd/engine/bias.py; the mean Q of real-goal and relabelled training rows);
 - :func:`integrated_bias`: per run and goal type, the bias averaged over epochs 1-50 (trapezoids
   over the evaluated epochs, so the dense early evaluations weigh what they span);
 - :func:`bias_tests`: two-sided permutation tests of that average between the configurations of a task.

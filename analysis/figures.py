@@ -27,8 +27,8 @@ from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
 from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, PAPER_EPOCHS  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
-from hersd.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
-from hersd.envs.tasks import task_rank, task_title  # noqa: E402
+from hersd.contract.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
+from hersd.contract.tasks import task_rank, task_title  # noqa: E402
 
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
     "share_real_success": ("real, successful", "tab:blue"),
@@ -62,7 +62,7 @@ class ReportFigure:
 
 
 def ordered_tasks(tasks) -> list[str]:
-    """Tasks in the order of hersd.envs.tasks.TASKS (the paper's first), others after, alphabetically."""
+    """Tasks in the order of hersd.contract.tasks.TASKS (the paper's first), others after, alphabetically."""
     return sorted(set(tasks), key=task_rank)
 
 
@@ -493,7 +493,7 @@ def critic_figures(analysis: Analysis) -> list[ReportFigure]:
     if curves.empty:
         return []
     caption = ("Top: the critic's Q(s, π(s, g), g) minus the discounted return the deterministic policy obtains "
-               "from s for g (hersd/bias.py; returns run 300 steps, past the 50-step limit the critic bootstraps "
+               "from s for g (hersd/engine/bias.py; returns run 300 steps, past the 50-step limit the critic bootstraps "
                "through), for the episodes' real goals and for hindsight goals (future achieved goals, each "
                "valued by a rollout from the restored state). Bottom: mean Q(s, a) over each epoch's training "
                "rows that kept their real goal and over the relabelled rows. Median over complete seeds, "

@@ -5,7 +5,7 @@ when there are many: :func:`start_reading`) into a :class:`RunTable`:
 
 - ``runs``: one row per run (columns: :data:`RUN_COLUMNS`);
 - ``epochs``: one row per run x completed epoch: the run's columns, then every field of
-  :data:`hersd.runlog.EPOCH_FIELDS`;
+  :data:`hersd.contract.runlog.EPOCH_FIELDS`;
 - ``sessions``: one row per run x training session: its commit, machine, threads, times
   (:func:`analysis.provenance.session_table`).
 
@@ -13,7 +13,7 @@ A run's *configuration* label (column ``config``) names what its seeds have in c
 grouped by ``(task, config)``; see :func:`config_label`. A label's runs share their number of epochs K:
 where the loaded runs of one label differ in K, K is appended but for the paper's (``HER`` at K = 200,
 ``HER K=4``), so runs of different K are never pooled, across tasks neither. Runs that share a label
-but not their identity less the seed (:func:`hersd.runstore.run_identity`, the run store's
+but not their identity less the seed (:func:`hersd.contract.runstore.run_identity`, the run store's
 own rule) are told apart by the settings that differ.
 """
 
@@ -29,11 +29,11 @@ import pandas as pd
 
 from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
-from hersd.config import AlgoConfig, TrainConfig
-from hersd.errors import ConfigError
-from hersd.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
-from hersd.runstore import HASHED_UNLESS, run_identity
-from hersd.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
+from hersd.contract.config import AlgoConfig, TrainConfig
+from hersd.contract.errors import ConfigError
+from hersd.contract.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
+from hersd.contract.runstore import HASHED_UNLESS, run_identity
+from hersd.contract.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
@@ -41,10 +41,10 @@ RUN_COLUMNS = (
     "config",         # configuration label (ordered categorical, see config_label)
     "algo",           # config.algo.name
     "learner",        # config.learner.name: ddpg (the paper's and every run before learners were a setting) | td3 | sac
-    "schedule",       # config.schedule.kind: a name of hersd.schedules' registry, or a schedule class's path
+    "schedule",       # config.schedule.kind: a name of hersd.contract.schedules' registry, or a schedule class's path
     "schedule_tag",   # the schedule's folder tag (Schedule.tag), one per distinct schedule
     "schedule_label",  # the schedule's name in the report (Schedule.label)
-    "schedule_record",  # the schedule's record as JSON (Schedule.record; hersd.schedules.schedule_from_record)
+    "schedule_record",  # the schedule's record as JSON (Schedule.record; hersd.contract.schedules.schedule_from_record)
     "constant_rate",  # one rate at every epoch (Schedule.constant_rate): the baselines
     "adaptive",       # the rate follows the run's progress (Schedule.adaptive)
     "eps", "beta1",   # the logged settings of the paper's kinds (NaN for kinds without them)
@@ -125,7 +125,7 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
 
 def _config_order(run: dict[str, Any]) -> tuple:
     """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success and
-    the other kinds (hersd.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
+    the other kinds (hersd.contract.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
     K (the paper's first)."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
     return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,

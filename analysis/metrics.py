@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.load import HER_EPS, HER_WEIGHTS
-from hersd.schedules import schedule_from_record, schedule_rank
-from hersd.envs.tasks import task_rank
+from hersd.contract.schedules import schedule_from_record, schedule_rank
+from hersd.contract.tasks import task_rank
 
 GROUP = ["task", "config"]
 SUCCESS_THRESHOLDS = (0.5, 0.9)

@@ -1,7 +1,7 @@
 """Where each run's numbers come from, read from its log: the provenance table of ``hersd-report``.
 
 A run's log holds one ``/run/meta`` message per training session (the first start, then one per
-resume; :mod:`hersd.runlog`). :func:`session_rows` keeps what each session says about the code and the
+resume; :mod:`hersd.contract.runlog`). :func:`session_rows` keeps what each session says about the code and the
 machine that ran it; :func:`provenance_table` makes one row per run of them (columns:
 :data:`PROVENANCE_COLUMNS`), written as ``tables/runs_provenance.csv`` and ``.md``. A field a session's
 log lacks (logs written before hersd recorded it) reads ``not logged``; :func:`provenance_note` says
@@ -17,12 +17,12 @@ from typing import Any
 import pandas as pd
 
 from analysis.tables import RUN_COLUMNS, Column, html_table
-from hersd.envs.tasks import task_rank, task_title
+from hersd.contract.tasks import task_rank, task_title
 
 NOT_LOGGED = "not logged"
 NO_COMMIT = "none"  # a session run outside a git checkout
 SESSION_SEPARATOR = " / "  # a run's per-session values, in session order, where its sessions differ
-START_TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"  # hersd.runlog's /run/meta start_time
+START_TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"  # hersd.contract.runlog's /run/meta start_time
 RUN_LOGS_LACK = {True: "run's log lacks", False: "runs' logs lack"}  # the note's words, by: a single run
 # per-session fields that logs of early sessions may lack: column -> what the note calls it
 MAYBE_UNLOGGED = {"cpu": "the CPU", "threads": "the thread count", "flush_denormal": "the flush_denormal setting"}

@@ -43,10 +43,10 @@ from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from analysis.provenance import provenance_html, provenance_table
 from analysis.studies import StudyStorage, open_study_storage
-from hersd.study import StudyStorageError, find_study_storages
+from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.workers import ForkedMap
-from hersd.envs.tasks import task_rank, task_title
+from hersd.contract.tasks import task_rank, task_title
 
 if TYPE_CHECKING:
     from analysis.figures import ReportFigure

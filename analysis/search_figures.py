@@ -2,14 +2,14 @@
 
 - ``<study>_beta_plane.png``: every trial in the (beta1, beta2) plane over the mu_eps
   iso-lines of eq. 11 (mu_eps = 1 - beta1 / (1 + exp(beta2))) with the band
-  hersd.schedules.MU_EPS_BAND (0.8 <= mu_eps <= 0.889) shaded (the seed paper's Fig. 12 region); complete trials are
+  hersd.contract.schedules.MU_EPS_BAND (0.8 <= mu_eps <= 0.889) shaded (the seed paper's Fig. 12 region); complete trials are
   filled dots coloured by their objective, pruned ones open circles coloured by their last
   report, failed ones crosses; the best trial is starred. Linear-schedule trials sit on
   beta2 = 0; constant-schedule trials have no place in the plane and are only counted.
 - ``<study>_best_trials.csv`` / ``.md``: the best complete trials, with mu_eps exact over
   the study's epochs (eq. 10) and by eq. 11, and their run directories.
 
-What a study holds (trial parameters, user attributes) is defined by :mod:`hersd.study`.
+What a study holds (trial parameters, user attributes) is defined by :mod:`hersd.contract.study`.
 :func:`study_figures` draws these for every study in a storage (or one), opened read-only
 by :func:`analysis.studies.open_study_storage`; ``python -m analysis.search_figures STORAGE OUT_DIR
 [--study NAME]`` does the same from the command line (``hersd-report`` draws them for every
@@ -37,10 +37,10 @@ from matplotlib.patches import Patch  # noqa: E402
 from optuna.trial import TrialState  # noqa: E402
 
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.config import ConfigError  # noqa: E402
-from hersd.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
+from hersd.contract.config import ConfigError  # noqa: E402
+from hersd.contract.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
-from hersd.study import (KIND_ATTR, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
+from hersd.contract.study import (KIND_ATTR, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
                          StudyStorageError, kind_params, mean_rates, schedule_config, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
@@ -200,7 +200,7 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
 
     ``storage_url_or_db_path``: a SQLite file (``results/search/<study>.db``), a journal file, ``journal:<path>``
     or a SQLAlchemy URL, opened read-only (:func:`analysis.studies.open_study_storage`, which raises
-    :class:`hersd.study.StudyStorageError` for one it cannot read).
+    :class:`hersd.contract.study.StudyStorageError` for one it cannot read).
     """
     opened = open_study_storage(storage_url_or_db_path)
     if study_name is not None and study_name not in opened.study_names:

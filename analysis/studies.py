@@ -1,9 +1,9 @@
-"""Opening a study storage read-only: the report's side of the study contract (:mod:`hersd.study`
+"""Opening a study storage read-only: the report's side of the study contract (:mod:`hersd.contract.study`
 names storages and encodes trials; ``sweeps.search.storage`` opens them for writing).
 
 :func:`open_study_storage` creates and changes nothing: SQLite in its read-only mode, PostgreSQL
 in read-only transactions, journals through a backend that only reads. Every failure is a
-:class:`hersd.study.StudyStorageError` with one line.
+:class:`hersd.contract.study.StudyStorageError` with one line.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from hersd.study import DRIVER_HINTS, StudyStorageError, connect_args, one_line, storage_file, storage_location, \
+from hersd.contract.study import DRIVER_HINTS, StudyStorageError, connect_args, one_line, storage_file, storage_location, \
     storage_name, with_driver
 
 

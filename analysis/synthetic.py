@@ -1,6 +1,6 @@
 """Synthetic run logs with chosen success curves, for tests, benchmarks and demos.
 
-They are written with :class:`hersd.runlog.RunLogWriter`, so they read back exactly like
+They are written with :class:`hersd.contract.runlog.RunLogWriter`, so they read back exactly like
 training's logs.
 """
 
@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from hersd.config import TrainConfig, config_record
-from hersd.runlog import LOG_NAME, RunLogWriter
-from hersd.runstore import RunFolder, config_hash
+from hersd.contract.config import TrainConfig, config_record
+from hersd.contract.runlog import LOG_NAME, RunLogWriter
+from hersd.contract.runstore import RunFolder, config_hash
 
 
 def epoch_records(config: TrainConfig, test_success: np.ndarray) -> list[dict[str, Any]]:

@@ -14,7 +14,7 @@ import gc
 import multiprocessing
 from typing import Any, Callable, Sequence
 
-from hersd.resources import available_cores
+from hersd.contract.cores import available_cores
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # what the forked children inherit
 

@@ -1,8 +1,8 @@
 """The bias evaluation's cost against a training epoch, measured side by side in one process.
 
 Builds a run's state at the paper's settings (FetchPush by default), trains ``--epochs`` epochs
-(``hersd.train.run_epoch``) and after each runs one bias evaluation at the defaults
-(``hersd.bias.BiasEvaluator``, its envs made once before the first), so machine load drifting hits
+(``hersd.engine.train.run_epoch``) and after each runs one bias evaluation at the defaults
+(``hersd.engine.bias.BiasEvaluator``, its envs made once before the first), so machine load drifting hits
 both alike. Printed: each epoch's and evaluation's seconds, the envs' making, and the share of a
 run of K epochs that the default evaluation epochs take (those <= K, times the median evaluation,
 plus one making of the envs per session) against K median epochs.
@@ -18,11 +18,11 @@ import time
 
 import torch
 
-from hersd.bias import BiasEvaluator
-from hersd.compose import compose_train
-from hersd.envs.make import make_env
-from hersd.run_state import RunState
-from hersd.train import run_epoch
+from hersd.engine.bias import BiasEvaluator
+from hersd.contract.compose import compose_train
+from hersd.engine.envs.make import make_env
+from hersd.engine.run_state import RunState
+from hersd.engine.train import run_epoch
 
 
 def main() -> None:

@@ -9,7 +9,7 @@ move. Measured here, one after another, and printed with their ratios:
 (b) practical floor: the same raw physics plus 40 updates of a minimal plain-PyTorch DDPG
     (``nn.Sequential`` nets of the same sizes, two Adams, the textbook critic-then-actor
     step) on batches already in memory, written here;
-(c) hersd's own ``collect`` + ``update`` steps (hersd/train.py) at 1 thread and at
+(c) hersd's own ``collect`` + ``update`` steps (hersd/engine/train.py) at 1 thread and at
     ``threads=auto`` (every core of this machine), with an empty buffer and with the buffer
     holding what 30 paper epochs store (3,000 episodes = 150,000 transitions);
 (c') hersd at 1 thread with ``precision=bf16`` (the updates' hidden layers in bfloat16), its
@@ -34,13 +34,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from hersd.compose import compose_train
-from hersd.config import DDPGConfig
-from hersd.envs.tasks import TASKS
-from hersd.learners.base import cpu_has_bf16
-from hersd.resources import available_cores
-from hersd.run_state import RunState
-from hersd.train import EpochStats, collect, update
+from hersd.contract.compose import compose_train
+from hersd.contract.config import DDPGConfig
+from hersd.contract.tasks import TASKS
+from hersd.engine.learners.base import cpu_has_bf16
+from hersd.contract.cores import available_cores
+from hersd.engine.run_state import RunState
+from hersd.engine.train import EpochStats, collect, update
 
 EPISODES_PER_CYCLE, HORIZON, BATCHES = 2, 50, 40
 STEPS_PER_CYCLE = EPISODES_PER_CYCLE * HORIZON

@@ -5,7 +5,7 @@ the denormal range for thousands of steps), and x86 CPUs compute on denormals ma
 Fresh networks have none. Every part alternates its variants (A B A B ...) in this one process,
 on one thread, so drift in the machine's load hits all of them:
 
-- ``cycles RUN_DIR``: update cycles (``hersd.train.update``: 40 updates of 256 and one target move
+- ``cycles RUN_DIR``: update cycles (``hersd.engine.train.update``: 40 updates of 256 and one target move
   at the paper's settings) from a run's checkpoint (``RUN_DIR`` holds ``run.mcap`` and
   ``checkpoint.pt``: a run in progress, or one made with ``keep_checkpoint=true``), reloaded before
   each timing; with ``--fresh``, from a fresh run of the same config instead (two cycles collected).
@@ -38,11 +38,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from hersd.denormals import set_intra_op_threads
-from hersd.envs.tasks import TASKS
-from hersd.render import load_run
-from hersd.run_state import RunState
-from hersd.train import EpochStats, collect, run_epoch, update
+from hersd.engine.denormals import set_intra_op_threads
+from hersd.contract.tasks import TASKS
+from hersd.engine.render import load_run
+from hersd.engine.run_state import RunState
+from hersd.engine.train import EpochStats, collect, run_epoch, update
 
 SETTINGS = (False, True)  # flush_denormal: the default before, the default after
 HORIZON, ENVS, BATCHES = 50, 2, 40

@@ -1,6 +1,6 @@
 """Epoch time with MEP over epoch time without, on FetchPush with a buffer of 2,000+ episodes.
 
-Both variants run one full epoch of ``hersd.train.train`` itself (50 cycles of 2 episodes and
+Both variants run one full epoch of ``hersd.engine.train.train`` itself (50 cycles of 2 episodes and
 40 updates, 20 test episodes, the paper's settings) from the same starting point, in this one
 process, alternating (off, on, on, off, ...) so drift in the shared machine's load hits both:
 
@@ -31,13 +31,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from hersd.compose import compose_train as compose
-from hersd.envs.make import make_env
-from hersd.replay.buffer import EpisodeBuffer, Episodes
-from hersd.run_state import RunState, load_checkpoint, save_checkpoint
-from hersd.runlog import read_run
-from hersd.runstore import CHECKPOINT_NAME
-from hersd.train import train
+from hersd.contract.compose import compose_train as compose
+from hersd.engine.envs.make import make_env
+from hersd.engine.replay.buffer import EpisodeBuffer, Episodes
+from hersd.engine.run_state import RunState, load_checkpoint, save_checkpoint
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import CHECKPOINT_NAME
+from hersd.engine.train import train
 
 BASE = ["task=push", "seed=0", "epochs=2", "quiet=true", "keep_checkpoint=true", "threads=1"]
 EPISODES_PER_EPOCH = 100  # 50 cycles x 2 rollouts

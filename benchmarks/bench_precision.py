@@ -4,7 +4,7 @@ layer in bf16 or in float32, and the CPU time of one DDPG update at each precisi
 (1) A freshly initialised critic of the paper's size (3 x 256 ReLU, FetchPush's 32 inputs) on one batch
 of 256 normalised inputs, its output bias set to 0 and to -15 (a trained Fetch critic's Q lies in
 [-50, 0]), run under bf16 autocast with every layer bf16 and with the output layer float32
-(:class:`hersd.learners.base.FullPrecisionLinear`, what precision=bf16 builds), each against float32.
+(:class:`hersd.engine.learners.base.FullPrecisionLinear`, what precision=bf16 builds), each against float32.
 (2) CPU seconds (process time: what a loaded machine's time slicing leaves out) of one DDPG update at
 FetchPush's sizes and the paper's settings, 1 thread, random batches of 256, the precisions alternating
 in rounds of 40 updates; needs a CPU with bf16 instructions.
@@ -20,11 +20,11 @@ import time
 import numpy as np
 import torch
 
-from hersd.config import DDPGConfig
-from hersd.envs.make import EnvSpec
-from hersd.learners.base import FullPrecisionLinear, cpu_has_bf16, mlp
-from hersd.learners.ddpg import DDPG
-from hersd.replay.buffer import TransitionBatch
+from hersd.contract.config import DDPGConfig
+from hersd.engine.envs.make import EnvSpec
+from hersd.engine.learners.base import FullPrecisionLinear, cpu_has_bf16, mlp
+from hersd.engine.learners.ddpg import DDPG
+from hersd.engine.replay.buffer import TransitionBatch
 
 INPUTS, BATCH, OFFSETS = 32, 256, (0.0, -15.0)
 OBS, GOAL, ACTION, UPDATES = 25, 3, 4, 40  # FetchPush's sizes; updates per round (one cycle's)

@@ -30,8 +30,8 @@ from unittest import mock
 import numpy as np
 
 from analysis.synthetic import write_run
-from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
-from hersd.runstore import run_dir
+from hersd.contract.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.runstore import run_dir
 
 BUDGET_SECONDS = 8.0
 EPOCHS = 200

@@ -1,6 +1,6 @@
 """Cost of the run log's crash-safe write per epoch, over a 200-epoch run.
 
-After each epoch :class:`hersd.runlog.RunLogWriter` rewrites the whole log (a complete, indexed
+After each epoch :class:`hersd.contract.runlog.RunLogWriter` rewrites the whole log (a complete, indexed
 MCAP file) to a temporary file, fsyncs it and renames it over ``run.mcap``, so the file grows
 and each write costs more than the last. This writes a real 200-epoch log's messages (a
 committed FetchPush log's metadata and epochs, with bias-evaluation fields added at the default
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 from mcap.writer import Writer
 
-from hersd.runlog import EPOCH_SCHEMA, RunLogWriter, read_records
+from hersd.contract.runlog import EPOCH_SCHEMA, RunLogWriter, read_records
 
 REPOSITORY = Path(__file__).resolve().parent.parent
-BIAS_EPOCHS = (1, 2, 5, 10, 20, 30, 50, 75, 100, 150, 200)  # hersd.config's default bias.epochs
+BIAS_EPOCHS = (1, 2, 5, 10, 20, 30, 50, 75, 100, 150, 200)  # hersd.contract.config's default bias.epochs
 EPOCH_SECONDS = 30.0
 
 

@@ -1,16 +1,16 @@
 """Microseconds per HER minibatch of hersd's sampler on a full FetchPush-sized buffer, by reward function.
 
-``hersd.replay.buffer.sample_transitions`` draws 256 transitions ('future' relabelling at 0.8, the
+``hersd.engine.replay.buffer.sample_transitions`` draws 256 transitions ('future' relabelling at 0.8, the
 paper's settings) from a full buffer of FetchPush's shape (1e6 transitions: 20,000 episodes of
 T = 50, obs 25, goal 3, action 4; synthetic arrays, since the cost depends on the shapes only).
 Side by side in one process, the reward function the sampler is given:
 
-(a) before: the Fetch rule as hersd.envs.reward_function gave it up to commit a30b165
+(a) before: the Fetch rule as hersd.engine.envs.reward_function gave it up to commit a30b165
     (``partial(goal_reward, distance_threshold=0.05)``, its body copied here);
-(b) after: ``hersd.envs.goal_envs.vectorised_reward`` of a FetchPush env, which hersd uses now;
+(b) after: ``hersd.engine.envs.goal_envs.vectorised_reward`` of a FetchPush env, which hersd uses now;
 (c) for scale: the env's own ``compute_reward`` called once on the whole batch;
 (d) for scale: the env's own ``compute_reward`` called per row (what an env that takes one pair
-    at a time costs, hersd.envs.goal_envs._env_reward's fallback).
+    at a time costs, hersd.engine.envs.goal_envs._env_reward's fallback).
 
 The variants alternate within each repeat (each repeat starting with the next one), so load
 from other processes hits them alike; printed: the median and the fastest of the repeats, and
@@ -30,10 +30,10 @@ from typing import Callable
 import gymnasium as gym
 import numpy as np
 
-import hersd.envs.make  # noqa: F401  (registers the gymnasium-robotics envs quietly)
-from hersd.envs.goal_envs import vectorised_reward
-from hersd.envs.tasks import TASKS
-from hersd.replay.buffer import Episodes, sample_transitions
+import hersd.engine.envs.make  # noqa: F401  (registers the gymnasium-robotics envs quietly)
+from hersd.engine.envs.goal_envs import vectorised_reward
+from hersd.contract.tasks import TASKS
+from hersd.engine.replay.buffer import Episodes, sample_transitions
 
 EPISODES, HORIZON, OBS, GOAL, ACTION = 20_000, 50, 25, 3, 4  # 1e6 transitions of FetchPush
 BATCH, RELABEL_RATE = 256, 0.8
@@ -41,7 +41,7 @@ BEFORE = "(a) before: partial(goal_reward)"
 
 
 def reward_before(achieved: np.ndarray, desired: np.ndarray, distance_threshold: float) -> np.ndarray:
-    """hersd.envs.goal_reward as of commit a30b165."""
+    """hersd.engine.envs.goal_reward as of commit a30b165."""
     distance = np.linalg.norm(achieved - desired, axis=-1)
     return -(distance > distance_threshold).astype(np.float32)
 

@@ -63,7 +63,7 @@ def main() -> None:
     two = sweep_seconds(2, args.epochs)
     with tempfile.TemporaryDirectory() as results:
         sweep_start = python_seconds([*SWEEP, "--dry-run", f"results_dir={results}"])
-    worker_start = python_seconds(["-c", "import hersd.train"])
+    worker_start = python_seconds(["-c", "import hersd.engine.train"])
     print(f"start-up: sweep command {sweep_start:.1f} s, each worker's imports {worker_start:.1f} s")
     print(f"4-run sweep, 1 job at a time: {one:6.1f} s")
     print(f"4-run sweep, 2 jobs at a time: {two:6.1f} s  -> speed-up {one / two:.2f}x")

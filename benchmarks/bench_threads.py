@@ -19,8 +19,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hersd.resources import available_cores
-from hersd.runlog import read_run
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
 
 SPIN = "import os; os.sched_setaffinity(0, {{{cpu}}})\nwhile True: pass"
 

@@ -5,7 +5,7 @@ callback beats the trial's heartbeat, reports the running objective to Optuna (a
 SQLite, as searches store by default, or in memory: the callback's own work without the
 database's) and asks the median pruner. Here ``train`` is
 replaced by a stand-in that writes ``--epochs`` synthetic records (a committed log's first
-record with epoch and test_success changed) through :class:`hersd.runlog.RunLogWriter`, as
+record with epoch and test_success changed) through :class:`hersd.contract.runlog.RunLogWriter`, as
 training does, calling the callback after each; only the callback's time is counted.
 
 Printed for each storage: milliseconds per callback at epochs 1, 50, 100, 150, 200, the mean,
@@ -34,7 +34,7 @@ from types import ModuleType, SimpleNamespace
 import numpy as np
 import optuna
 
-from hersd.runlog import RunLogWriter, read_records
+from hersd.contract.runlog import RunLogWriter, read_records
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 DEFAULT_LOG = REPOSITORY / "results/push/her/constant-0.8/seed0-64e236fe/run.mcap"
@@ -67,8 +67,8 @@ def callback_seconds(log: Path, epochs: int, folder: Path, storage: str | None) 
 
     raw = read_records(log)
     seconds: list[tuple[float, float]] = []
-    sys.modules["hersd.train"] = ModuleType("hersd.train")  # the stand-in, without torch or MuJoCo
-    sys.modules["hersd.train"].train = stand_in_train(raw.meta, synthetic_records(raw.records[0], epochs), seconds)
+    sys.modules["hersd.engine.train"] = ModuleType("hersd.engine.train")  # the stand-in, without torch or MuJoCo
+    sys.modules["hersd.engine.train"].train = stand_in_train(raw.meta, synthetic_records(raw.records[0], epochs), seconds)
     study = optuna.create_study(storage=storage, direction="maximize",
                                 pruner=optuna.pruners.MedianPruner(n_startup_trials=0, n_warmup_steps=0))
     trial = study.ask()

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Rewrite every run log below a folder in the current format of hersd.runlog: chunked, indexed,
+"""Rewrite every run log below a folder in the current format of hersd.contract.runlog: chunked, indexed,
 with summary and footer, plain-typed schemas (a missing value is a missing key, not null).
 
     python scripts/convert_logs.py FOLDER [FOLDER ...]
@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from hersd.runlog import LOG_NAME, RunLogError, read_records, replace_file, rewritten
+from hersd.contract.runlog import LOG_NAME, RunLogError, read_records, replace_file, rewritten
 
 
 def convert(path: Path) -> str:

@@ -2,7 +2,7 @@
 """Land a campaign's logs in the repository: copy each run's ``run.mcap`` (complete or in
 progress, never a checkpoint) and its ``policy/epoch_<k>.gif`` from the campaign folder to the
 same paths below ``results/``; with ``--commit``, commit each complete run's files with git. A log is
-landed in the current format of hersd.runlog (a campaign run by an older hersd writes the earlier
+landed in the current format of hersd.contract.runlog (a campaign run by an older hersd writes the earlier
 one): every readable message, identical in content (``scripts/convert_logs.py``).
 
     python scripts/land.py [CAMPAIGN_DIR] [--into RESULTS] [--commit]
@@ -31,8 +31,8 @@ import sys
 import time
 from pathlib import Path
 
-from hersd.runlog import LOG_NAME, RunLogError, read_records, rewritten
-from hersd.runstore import POLICY_DIR, RunFolder
+from hersd.contract.runlog import LOG_NAME, RunLogError, read_records, rewritten
+from hersd.contract.runstore import POLICY_DIR, RunFolder
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 GIT_TRIES, GIT_WAIT = 10, 3.0  # tries of a git command that fails, seconds between them

@@ -4,7 +4,7 @@ Data flow: ``conf/sweep.yaml`` (+ ``conf/grid/<name>.yaml`` and command-line ove
 the ``runstore`` sweeper (``hydra_plugins/hersd_sweeper``) expands the grid and calls
 :func:`sweep_runs`, which composes and checks every run before any starts, skips the
 complete ones, and hands the rest to the launcher (joblib locally, one job per core;
-submitit for SLURM). Each job calls :func:`run_job`, i.e. ``hersd.train.train`` on its own
+submitit for SLURM). Each job calls :func:`run_job`, i.e. ``hersd.engine.train.train`` on its own
 config; the run store (one directory per config, a lock, checkpoints) makes re-running a
 sweep finish what is missing and nothing else.
 """
@@ -22,10 +22,10 @@ from typing import Any, Callable
 
 from omegaconf import DictConfig
 
-from hersd.compose import CONFIG_PATH, group_options
-from hersd.errors import ConfigError
-from hersd.resources import available_cores, resolve_threads
-from hersd.runstore import RunFolder, RunLockedError, run_dir
+from hersd.contract.compose import CONFIG_PATH, group_options
+from hersd.contract.errors import ConfigError
+from hersd.contract.cores import available_cores, resolve_threads
+from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error
 from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas  # noqa: F401
 from sweeps.status import run_status
@@ -124,7 +124,7 @@ def check_launcher(launcher: DictConfig) -> None:
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
     """``threads=auto`` for each run of a local launcher: this machine's idle cores divided among
-    the runs in flight at once (:func:`hersd.resources.resolve_threads`). None where each job has
+    the runs in flight at once (:func:`hersd.contract.cores.resolve_threads`). None where each job has
     an allocation of its own (SLURM): it resolves ``auto`` itself (``SLURM_CPUS_PER_TASK``, its CPU affinity)."""
     at_once = concurrent_runs(launcher, n_runs)
     return None if at_once is None else resolve_threads("auto", at_once)
@@ -172,7 +172,7 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     """Train one run of the sweep; never raises, so one failure does not stop the others."""
     from hydra.core.hydra_config import HydraConfig
 
-    from hersd.train import train
+    from hersd.engine.train import train
 
     hydra_cfg = HydraConfig.get()
     train_cfg = job_train_config(cfg)

@@ -33,11 +33,11 @@ from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
-from hersd.compose import open_schedule, register_schema, register_train_schema
-from hersd.config import TrainConfig, to_train_config
-from hersd.errors import ConfigError
-from hersd.resources import available_cores
-from hersd.runstore import run_dir
+from hersd.contract.compose import open_schedule, register_schema, register_train_schema
+from hersd.contract.config import TrainConfig, to_train_config
+from hersd.contract.errors import ConfigError
+from hersd.contract.cores import available_cores
+from hersd.contract.runstore import run_dir
 from sweeps.hydra_private import apply_value_overrides, basic_sweeper_class, group_test, grid_overrides
 
 

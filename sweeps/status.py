@@ -16,8 +16,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from hersd.runlog import RunLogError
-from hersd.runstore import RunFolder
+from hersd.contract.runlog import RunLogError
+from hersd.contract.runstore import RunFolder
 
 PACE_EPOCHS = 5  # a run's pace: the mean time of its last this many epochs
 

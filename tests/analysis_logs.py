@@ -11,7 +11,7 @@ import pandas as pd
 
 from analysis.load import load_runs
 from analysis.synthetic import write_run
-from hersd.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
 
 # Five seeds x six epochs of HER test success, smoothed with a trailing window of 3 epochs.
 WINDOW = 3

@@ -21,9 +21,9 @@ def tiny(tmp_path) -> list[str]:
 def idle_machine(monkeypatch):
     """threads=auto sees every core idle (in this process): its thread count no longer depends on
     what else the machine (e.g. another test worker) is doing."""
-    from hersd import resources
+    from hersd.contract import cores
 
-    monkeypatch.setattr(resources, "idle_cores", lambda seconds=0.0: float(resources.available_cores()))
+    monkeypatch.setattr(cores, "idle_cores", lambda seconds=0.0: float(cores.available_cores()))
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,7 @@ def hand_sized(tmp_path_factory) -> Path:
 
     from analysis.synthetic import write_run
     from analysis_logs import HER_SUCCESS, LINEAR_SUCCESS, make_config
-    from hersd.config import ScheduleConfig
+    from hersd.contract.config import ScheduleConfig
 
     folder = tmp_path_factory.mktemp("hand_sized")
     for seed, curve in enumerate(HER_SUCCESS):
@@ -62,7 +62,7 @@ def sweep(tmp_path_factory) -> Path:
 
     from analysis.synthetic import write_run
     from analysis_logs import make_config
-    from hersd.config import ScheduleConfig
+    from hersd.contract.config import ScheduleConfig
 
     folder = tmp_path_factory.mktemp("sweep")
     variants = [(ScheduleConfig(), 1.0, False), (ScheduleConfig(), 0.5, False), (ScheduleConfig(), 1.0, True),

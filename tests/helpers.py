@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from hersd.runlog import EPOCH_FIELDS, read_run
+from hersd.contract.runlog import EPOCH_FIELDS, read_run
 
 # A run small enough for a unit test: FetchReach, 2 cycles of 5 updates on 64 transitions,
 # one test round, no policy animation (tests/test_render.py renders) and no bias evaluation
@@ -26,7 +26,7 @@ OBS, GOAL, ACTION, BATCH = 5, 3, 2, 16
 
 def tiny_spec(max_action: float = 1.0):
     """An EnvSpec of the tiny learners' sizes (a Fetch-like horizon and reward range)."""
-    from hersd.envs.make import EnvSpec
+    from hersd.engine.envs.make import EnvSpec
 
     return EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=max_action,
                    distance_threshold=0.05, reward_range=(-1.0, 0.0))
@@ -39,8 +39,8 @@ def tiny_learner(name: str = "ddpg", max_action: float = 1.0, seed: int = 0,
     import numpy as np
     import torch
 
-    from hersd.config import DDPGConfig, LearnerConfig, TrainConfig
-    from hersd.learners import learner_class
+    from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig
+    from hersd.engine.learners import learner_class
 
     learner = LearnerConfig(name=name)
     if settings:
@@ -57,7 +57,7 @@ def batch(reward: float = -1.0, seed: int = 1):
     """A TransitionBatch of BATCH random transitions with one reward, no relabelled row."""
     import numpy as np
 
-    from hersd.replay.buffer import TransitionBatch
+    from hersd.engine.replay.buffer import TransitionBatch
 
     rng = np.random.default_rng(seed)
     f32 = np.float32

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from mcap.writer import Writer
 
-from hersd.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
+from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
 
 META = {"run_id": "0badcafe", "config": {"seed": 0, "schedule": {"mean_rate": None}}, "seed": 0,
         "versions": {"hersd": "test"}, "git_commit": None, "command": "test", "start_time": "2026-01-01T00:00:00+0000",

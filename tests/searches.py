@@ -11,7 +11,7 @@ import pytest
 from helpers import TINY
 from optuna.trial import TrialState
 
-from hersd.runlog import read_run
+from hersd.contract.runlog import read_run
 from sweeps.search import cli
 from sweeps.search.storage import open_storage
 

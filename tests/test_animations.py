@@ -14,7 +14,7 @@ from analysis.load import load_runs
 from analysis.metrics import analyse
 from analysis.report import build_report
 from analysis.synthetic import write_animation, write_run
-from hersd.config import ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import ScheduleConfig, TaskConfig, TrainConfig
 
 EPOCHS = 6
 LINEAR = ScheduleConfig("linear", beta1=0.5)

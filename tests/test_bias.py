@@ -1,4 +1,4 @@
-"""The bias evaluation (hersd/bias.py): known returns through the time limit, hindsight goals valued by
+"""The bias evaluation (hersd/engine/bias.py): known returns through the time limit, hindsight goals valued by
 rollouts from the restored state, and a run's metrics and folder untouched by it."""
 
 import mujoco
@@ -7,12 +7,12 @@ import pandas as pd
 import pytest
 from helpers import TINY, metrics
 
-from hersd.bias import MJ_STATE, BiasEvaluator, discounted_returns, draw_pairs, restore
-from hersd.compose import compose_train
-from hersd.envs.make import env_spec, make_env
-from hersd.envs.goal_envs import vectorised_reward
-from hersd.runlog import read_run
-from hersd.train import train
+from hersd.engine.bias import MJ_STATE, BiasEvaluator, discounted_returns, draw_pairs, restore
+from hersd.contract.compose import compose_train
+from hersd.engine.envs.make import env_spec, make_env
+from hersd.engine.envs.goal_envs import vectorised_reward
+from hersd.contract.runlog import read_run
+from hersd.engine.train import train
 
 GAMMA = 0.98
 BIAS_FIELDS = [f"{part}_{goal}_{stat}" for goal in ("real", "hindsight", "moved")

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from hersd.runlog import read_run
-from hersd.runstore import RunFolder
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import RunFolder
 from servers import SlurmCluster, postgres_database, slurm_cluster, wait_until
 
 # One xdist worker runs them all: the SLURM cluster is started once per module and owns system paths.

@@ -13,16 +13,16 @@ from pathlib import Path
 import pytest
 from helpers import TINY
 
-import hersd.run_state
-import hersd.train
-from hersd.cli import main
-from hersd.compose import compose_train
-from hersd.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
+import hersd.engine.run_state
+import hersd.engine.train
+from hersd.engine.cli import main
+from hersd.contract.compose import compose_train
+from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
                           TD3Config, TrainConfig)
-from hersd.envs.make import EnvSpec
-from hersd.runlog import read_run
-from hersd.runstore import CHECKPOINT_NAME
-from hersd.schedules import SCHEDULES
+from hersd.engine.envs.make import EnvSpec
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import CHECKPOINT_NAME
+from hersd.contract.schedules import SCHEDULES
 
 INF, NAN, HUGE = float("inf"), float("nan"), 1e308
 BIG_INT = 10 ** 18
@@ -143,13 +143,13 @@ FETCH = EnvSpec(obs_dim=25, goal_dim=3, action_dim=4, horizon=50, max_action=1.0
     (["ddpg.buffer_size=100000000000"], "ddpg.buffer_size"),
 ])
 def test_memory_check_counts_each_allocation_and_names_its_setting(monkeypatch, overrides, setting):
-    monkeypatch.setattr(hersd.run_state, "available_memory_bytes", lambda: 64 * 2 ** 30)  # a 64 GiB machine
+    monkeypatch.setattr(hersd.engine.run_state, "available_memory_bytes", lambda: 64 * 2 ** 30)  # a 64 GiB machine
     cfg = compose_train(["task=push", *overrides])
     with pytest.raises(ConfigError) as err:
-        hersd.run_state.check_memory(cfg, FETCH, one_env_bytes=23 * 2 ** 20)
+        hersd.engine.run_state.check_memory(cfg, FETCH, one_env_bytes=23 * 2 ** 20)
     message = str(err.value)
     assert "\n" not in message and setting in message.split(" GiB are available; lower ")[1], message
-    hersd.run_state.check_memory(compose_train(["task=push"]), FETCH, one_env_bytes=23 * 2 ** 20)  # defaults fit
+    hersd.engine.run_state.check_memory(compose_train(["task=push"]), FETCH, one_env_bytes=23 * 2 ** 20)  # defaults fit
 
 
 def test_a_minibatch_too_large_for_memory_is_refused_at_start_in_one_line(tmp_path, capsys):
@@ -164,7 +164,7 @@ def test_a_minibatch_too_large_for_memory_is_refused_at_start_in_one_line(tmp_pa
 def test_hersd_train_with_an_overflowing_weight_exits_2_with_one_line_and_writes_nothing(tmp_path):
     results = tmp_path / "results"
     script = Path(sys.executable).with_name("hersd-train")
-    command = [str(script)] if script.exists() else [sys.executable, "-m", "hersd.cli"]
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "hersd.engine.cli"]
     done = subprocess.run([*command, "task=reach", "algo.lambda_h=1e308", f"results_dir={results}"],
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 2
@@ -174,14 +174,14 @@ def test_hersd_train_with_an_overflowing_weight_exits_2_with_one_line_and_writes
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning", "ignore:invalid value:RuntimeWarning")
 def test_a_run_whose_loss_turns_nan_stops_with_one_line_and_keeps_its_finished_epochs(tmp_path, capsys, monkeypatch):
-    run_epoch = hersd.train.run_epoch
+    run_epoch = hersd.engine.train.run_epoch
 
     def poisoned(state, epoch):  # from epoch 2 on, hindsight rewards of -1e308 (the bounds refuse this up front)
         if epoch == 2:
             state.cfg.algo.lambda_h = 1e308
         return run_epoch(state, epoch)
 
-    monkeypatch.setattr(hersd.train, "run_epoch", poisoned)
+    monkeypatch.setattr(hersd.engine.train, "run_epoch", poisoned)
     monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings on the NaN actions to MUJOCO_LOG.TXT here
     with pytest.raises(SystemExit) as exit_info:
         main([*TINY, "epochs=3", "quiet=true", "threads=1", f"results_dir={tmp_path / 'results'}"])

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
-from hersd.compose import compose, compose_train, group_options
-from hersd.config import TrainConfig
-from hersd.runlog import read_run
-from hersd.runstore import config_hash
-from hersd.schedules import schedule_from_record
-from hersd.envs.tasks import CUSTOM, TASKS
+from hersd.contract.compose import compose, compose_train, group_options
+from hersd.contract.config import TrainConfig
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import config_hash
+from hersd.contract.schedules import schedule_from_record
+from hersd.contract.tasks import CUSTOM, TASKS
 from sweeps.launch import register_schemas
 
 
@@ -84,7 +84,7 @@ def test_every_launcher_composes_with_the_sweep(launcher):
 
 
 def test_mean_rate_solves_beta1_by_eq10():
-    from hersd.schedules import mean_rate_exact
+    from hersd.contract.schedules import mean_rate_exact
 
     cfg = compose_train(["schedule=exponential", "schedule.mean_rate=0.85", "schedule.beta2=0.5", "epochs=200"])
     assert mean_rate_exact(cfg.schedule.beta1, 0.5, 200) == pytest.approx(0.85, abs=1e-5)
@@ -185,7 +185,7 @@ def schedule_defaults(stated: dict, name: str) -> dict:
     (its own ``kind``, else that of the preset its defaults list builds on, else the default kind's)."""
     import yaml
 
-    from hersd.schedules import DEFAULT, schedule_class
+    from hersd.contract.schedules import DEFAULT, schedule_class
 
     kind, parents = stated.get("kind"), (stated.get("defaults", []) if name.startswith("schedule/") else [])
     while kind is None and parents:

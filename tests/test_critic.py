@@ -64,8 +64,8 @@ def test_the_report_draws_the_critic_from_real_logs(tmp_path):
     from analysis.figures import critic_figures
     from analysis.load import load_runs
     from analysis.metrics import analyse
-    from hersd.compose import compose_train
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.engine.train import train
 
     run = [o for o in TINY if o != "bias.epochs=[]"] + ["epochs=2", "quiet=true", "threads=1", "bias.epochs=[1,2]",
                                                         "bias.episodes=1", "bias.hindsight_pairs=2",

@@ -29,7 +29,7 @@ def test_target_q_is_clipped_to_its_range(reward, bound):
 @pytest.mark.parametrize("learner", ["ddpg", "td3"])
 @pytest.mark.parametrize("reward, bound", [(1e6, 50.0), (-1e6, 0.0)])
 def test_target_q_of_rewards_0_or_1_is_clipped_to_0_and_q_max(learner, reward, bound):
-    """The mazes' range (rewards 0 or 1): target Q in [0, 1 / (1 - gamma)] (hersd.run_state.discounting)."""
+    """The mazes' range (rewards 0 or 1): target Q in [0, 1 / (1 - gamma)] (hersd.engine.run_state.discounting)."""
     agent = tiny_learner(learner, q_range=(0.0, 50.0))
     data = batch()
     target = agent.target_q(agent._inputs(data.next_obs, data.goal), torch.full((BATCH, 1), reward))

@@ -1,4 +1,4 @@
-"""hersd/denormals.py: denormals flushed to zero in a run's torch work, on every intra-op thread, with the
+"""hersd/engine/denormals.py: denormals flushed to zero in a run's torch work, on every intra-op thread, with the
 physics in IEEE arithmetic; off with flush_denormal=false; the default on."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ import pytest
 import torch
 from gymnasium_robotics.envs.robot_env import MujocoRobotEnv
 
-from hersd.compose import compose_train
-from hersd.config import TrainConfig
-from hersd.denormals import denormals_flushed, set_intra_op_threads, thread_flush_states
-from hersd.learners.ddpg import DDPG
-from hersd.runlog import read_run
-from hersd.train import train
+from hersd.contract.compose import compose_train
+from hersd.contract.config import TrainConfig
+from hersd.engine.denormals import denormals_flushed, set_intra_op_threads, thread_flush_states
+from hersd.engine.learners.ddpg import DDPG
+from hersd.contract.runlog import read_run
+from hersd.engine.train import train
 
 DENORMAL = 1e-40  # below float32's smallest normal, 1.18e-38
 

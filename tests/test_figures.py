@@ -18,8 +18,8 @@ from analysis.figures import LEGEND_CHARACTERS, mean_rate_figures, composition_f
 from analysis.load import load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import write_run
-from hersd.config import ScheduleConfig
-from hersd.schedules import Linear
+from hersd.contract.config import ScheduleConfig
+from hersd.contract.schedules import Linear
 
 from analysis_logs import PUSH_STEPS, WINDOW, make_config, write_campaign_midway
 from analysis_logs import run_tables as _tables

@@ -1,6 +1,6 @@
-"""hersd.envs.goal_envs: the vectorised reward of each env family equals the env's own compute_reward
+"""hersd.engine.envs.goal_envs: the vectorised reward of each env family equals the env's own compute_reward
 on (achieved, desired) pairs drawn from real observations (pair by pair: the env's batched call is
-wrong for the Pen tasks, see hersd/envs/goal_envs.py); the family's reward range and success radius
+wrong for the Pen tasks, see hersd/engine/envs/goal_envs.py); the family's reward range and success radius
 are the env's."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import hersd.envs.make  # noqa: F401  (registers the gymnasium-robotics envs quietly)
-from hersd.envs.goal_envs import is_goal_env, reward_family, reward_range, success_radius, vectorised_reward
+import hersd.engine.envs.make  # noqa: F401  (registers the gymnasium-robotics envs quietly)
+from hersd.engine.envs.goal_envs import is_goal_env, reward_family, reward_range, success_radius, vectorised_reward
 
 pytestmark = pytest.mark.usefixtures("private_tempdir")  # maze envs' model files stay in tmp_path
 

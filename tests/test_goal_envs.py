@@ -9,14 +9,14 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from hersd.compose import compose_train
-from hersd.config import ConfigError
-from hersd.envs.make import env_spec, make_env
-from hersd.envs.goal_envs import vectorised_reward
-from hersd.replay.buffer import sample_transitions
-from hersd.run_state import RunState
-from hersd.runlog import read_run
-from hersd.train import EpochStats, collect, evaluate, train
+from hersd.contract.compose import compose_train
+from hersd.contract.config import ConfigError
+from hersd.engine.envs.make import env_spec, make_env
+from hersd.engine.envs.goal_envs import vectorised_reward
+from hersd.engine.replay.buffer import sample_transitions
+from hersd.engine.run_state import RunState
+from hersd.contract.runlog import read_run
+from hersd.engine.train import EpochStats, collect, evaluate, train
 
 pytestmark = pytest.mark.usefixtures("private_tempdir")  # maze envs' model files stay in tmp_path
 

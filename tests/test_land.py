@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from analysis.synthetic import write_animation, write_run
-from hersd.config import TrainConfig
-from hersd.runlog import read_records
+from hersd.contract.config import TrainConfig
+from hersd.contract.runlog import read_records
 
 LAND = [sys.executable, str(Path(__file__).resolve().parent.parent / "scripts" / "land.py")]
 DONE, RUNNING = Path("push/her/constant-0.8/seed5-aaaa0000"), Path("push/her/linear-b1_0.25/seed5-bbbb1111")

@@ -11,11 +11,11 @@ import pytest
 import torch
 from helpers import GOAL, OBS, batch, tiny_spec
 
-from hersd.compose import compose_train
-from hersd.config import SACConfig, TD3Config
-from hersd.learners import LEARNERS, learner_class
-from hersd.learners.td3 import TD3
-from hersd.runstore import config_hash
+from hersd.contract.compose import compose_train
+from hersd.contract.config import SACConfig, TD3Config
+from hersd.engine.learners import LEARNERS, learner_class
+from hersd.engine.learners.td3 import TD3
+from hersd.contract.runstore import config_hash
 
 TINY_NETWORKS = ["task=reach", "ddpg.hidden_layers=2", "ddpg.hidden_units=16"]
 SECTIONS = {"td3": TD3Config, "sac": SACConfig}  # learner.<key>.* of the package's learners with settings
@@ -68,6 +68,6 @@ def test_a_learner_setting_changes_the_runs_hash_exactly_when_it_changes_what_th
 
 
 def test_the_configs_table_of_the_package_learners_settings_is_what_their_classes_declare():
-    from hersd.config import PACKAGE_LEARNERS
+    from hersd.contract.config import PACKAGE_LEARNERS
 
     assert {name: learner_class(name).SETTINGS for name in PACKAGE_LEARNERS} == PACKAGE_LEARNERS

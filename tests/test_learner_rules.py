@@ -12,7 +12,7 @@ import pytest
 import torch
 from helpers import ACTION, BATCH, batch, tiny_learner
 
-from hersd.config import ConfigError, SACConfig, TD3Config
+from hersd.contract.config import ConfigError, SACConfig, TD3Config
 
 LEARNERS = ["td3", "sac"]
 

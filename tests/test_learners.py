@@ -4,6 +4,7 @@ loss settings), TD3's and SAC's update rules on tiny networks, exact resume, and
 from __future__ import annotations
 
 import copy
+import pkgutil
 
 import numpy as np
 import pandas as pd
@@ -11,12 +12,13 @@ import pytest
 import torch
 from helpers import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
-from hersd.compose import compose_train
-from hersd import learner_registry
-from hersd.config import learner_names
-from hersd.learners import LEARNERS
-from hersd.runlog import read_run
-from hersd.train import train
+from hersd.contract.compose import compose_train
+from hersd.contract import learner_registry
+from hersd.contract.config import PACKAGE_LEARNERS
+from hersd.engine import learners
+from hersd.engine.learners import LEARNERS
+from hersd.contract.runlog import read_run
+from hersd.engine.train import train
 
 
 def make(learner: str, **settings):
@@ -35,8 +37,9 @@ CHECKPOINT_LAYOUT = {
 
 
 def test_every_learner_module_registers_the_class_of_its_name_that_builds_itself():
-    assert learner_names() == ["ddpg", "sac", "td3"]
-    assert set(LEARNERS) == set(learner_names())
+    modules = sorted(module.name for module in pkgutil.iter_modules(learners.__path__) if module.name != "base")
+    assert modules == ["ddpg", "sac", "td3"] == sorted(PACKAGE_LEARNERS)
+    assert set(LEARNERS) == set(modules)
     for name, cls in LEARNERS.items():
         agent = tiny_learner(name)
         assert type(agent) is cls and cls.NAME == name and cls.LOSS_SETTINGS
@@ -68,9 +71,9 @@ def test_network_bytes_count_the_built_networks_targets_gradients_and_adam_momen
 
 def test_a_new_learner_is_one_class_the_run_asks(monkeypatch):
     """A class with a NAME is found by make_agent, the memory check and the non-finite-loss message."""
-    from hersd import learners, run_state
-    from hersd.learners.ddpg import DDPG
-    from hersd.train import NonFiniteLossError, check_finite
+    from hersd.engine import run_state
+    from hersd.engine.learners.ddpg import DDPG
+    from hersd.engine.train import NonFiniteLossError, check_finite
 
     monkeypatch.setattr(learner_registry, "LEARNERS", dict(learner_registry.LEARNERS))
 

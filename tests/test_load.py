@@ -14,9 +14,9 @@ from analysis.figures import config_styles
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
-from hersd.config import ScheduleConfig, config_record
-from hersd.runlog import RunLogWriter, read_run
-from hersd.runstore import config_hash
+from hersd.contract.config import ScheduleConfig, config_record
+from hersd.contract.runlog import RunLogWriter, read_run
+from hersd.contract.runstore import config_hash
 
 from analysis_logs import WINDOW, make_config
 
@@ -156,7 +156,7 @@ def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
 
 
 def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_mean_rate(tmp_path):
-    from hersd.config import LearnerConfig
+    from hersd.contract.config import LearnerConfig
 
     curve = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
     write_run(tmp_path / "ddpg", make_config(), curve)

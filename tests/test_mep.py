@@ -6,16 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import hersd.run_state as run_state_module
-import hersd.train as train_module
-from hersd.compose import compose_train as compose
-from hersd.config import MEPConfig
-from hersd.envs.goal_envs import goal_reward
-from hersd.replay.mep import EpisodePrioritizer, entropy, rank_priorities
-from hersd.replay.buffer import Episodes, sample_transitions
+import hersd.engine.run_state as run_state_module
+import hersd.engine.train as train_module
+from hersd.contract.compose import compose_train as compose
+from hersd.contract.config import MEPConfig
+from hersd.engine.envs.goal_envs import goal_reward
+from hersd.engine.replay.mep import EpisodePrioritizer, entropy, rank_priorities
+from hersd.engine.replay.buffer import Episodes, sample_transitions
 from helpers import TIMING
-from hersd.runlog import read_run
-from hersd.train import train
+from hersd.contract.runlog import read_run
+from hersd.engine.train import train
 
 HORIZON = 50
 # 3 cycles of 4 updates on small networks: enough stored episodes for a mixture fit in epoch 2.

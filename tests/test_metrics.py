@@ -14,7 +14,7 @@ import pytest
 from analysis import metrics
 from analysis.load import load_runs
 from analysis.synthetic import write_run
-from hersd.config import ScheduleConfig, TrainConfig
+from hersd.contract.config import ScheduleConfig, TrainConfig
 
 from analysis_logs import HER_MEDIAN, PUSH_EPOCHS, PUSH_STEPS, WINDOW, make_config, write_campaign_midway
 from analysis_logs import run_tables as _tables
@@ -171,7 +171,7 @@ def test_aggregate_pools_tasks(analysed):
 def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
     """A folder holding HER at K = 6 and K = 8 (labels "HER K=6", "HER K=8") and TD3
     runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""
-    from hersd.config import LearnerConfig
+    from hersd.contract.config import LearnerConfig
 
     def td3(config: TrainConfig) -> TrainConfig:
         config.learner = LearnerConfig(name="td3")

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from helpers import TINY
 
-from hersd.runlog import read_run
+from hersd.contract.runlog import read_run
 
 ROOT = Path(__file__).resolve().parent.parent
 

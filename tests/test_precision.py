@@ -1,4 +1,4 @@
-"""precision=bf16 (hersd/learners/base.py, docs/LEARNERS.md "Precision"): the hidden layers of an update's
+"""precision=bf16 (hersd/engine/learners/base.py, docs/LEARNERS.md "Precision"): the hidden layers of an update's
 passes run in bfloat16 and change its numbers, fp32 runs float32 throughout; a CPU without bf16
 instructions refuses it; bf16 is another run's identity, fp32 every earlier run's."""
 
@@ -12,15 +12,15 @@ import torch
 from helpers import GOAL, OBS, batch, tiny_spec
 from torch import nn
 
-import hersd.learners.base as base
-from hersd.compose import compose_train
-from hersd.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
-from hersd.envs.make import env_spec, make_env
-from hersd.learners import learner_class
-from hersd.run_state import discounting
-from hersd.runlog import read_run
-from hersd.runstore import config_hash, run_identity
-from hersd.train import train
+import hersd.engine.learners.base as base
+from hersd.contract.compose import compose_train
+from hersd.contract.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
+from hersd.engine.envs.make import env_spec, make_env
+from hersd.engine.learners import learner_class
+from hersd.engine.run_state import discounting
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import config_hash, run_identity
+from hersd.engine.train import train
 
 LEARNERS = ("ddpg", "td3", "sac")
 
@@ -126,7 +126,7 @@ def test_bf16_ddpg_learns_fetch_reach(tmp_path):
 
 def test_a_bf16_runs_policy_renders_on_a_cpu_without_bf16_instructions(monkeypatch):
     """hersd-render builds the run's learner only to act, which is float32 at either precision."""
-    from hersd.render import policy_from_checkpoint
+    from hersd.engine.render import policy_from_checkpoint
 
     cfg = compose_train(["task=reach", "precision=bf16"])
     monkeypatch.setattr(base, "cpu_has_bf16", lambda: True)

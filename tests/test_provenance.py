@@ -12,8 +12,8 @@ from analysis.provenance import NO_COMMIT, NOT_LOGGED, provenance_note, provenan
 from analysis.report import build_report
 from analysis.synthetic import epoch_records, write_run
 from analysis_logs import make_config
-from hersd.config import config_record
-from hersd.runlog import RunLogWriter, read_run
+from hersd.contract.config import config_record
+from hersd.contract.runlog import RunLogWriter, read_run
 
 FIRST = {"git_commit": "a" * 40 + "-dirty", "threads": 1, "machine": {"cpu_model": "CPU A"},
          "start_time": "2026-01-02T03:04:05+0000"}

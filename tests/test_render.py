@@ -1,4 +1,4 @@
-"""Policy animations (hersd/render.py): rendering changes nothing a run computes, the GIF shows the
+"""Policy animations (hersd/engine/render.py): rendering changes nothing a run computes, the GIF shows the
 scene, hersd-render draws a checkpoint's epoch as training did, and every failure is one line."""
 
 from __future__ import annotations
@@ -11,12 +11,12 @@ import pytest
 from helpers import TINY, metrics
 from PIL import Image, ImageSequence
 
-import hersd.render
-import hersd.train
-from hersd.compose import compose_train
-from hersd.render import RenderError, close_render_env, headless_backend, main, make_render_env, renders_at
-from hersd.runstore import CHECKPOINT_NAME, RunFolder
-from hersd.train import train
+import hersd.engine.render
+import hersd.engine.train
+from hersd.contract.compose import compose_train
+from hersd.engine.render import RenderError, close_render_env, headless_backend, main, make_render_env, renders_at
+from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder
+from hersd.engine.train import train
 
 RUN = [*(o for o in TINY if o != "render_every=0"), "epochs=2", "seed=5", "quiet=true", "threads=1"]
 
@@ -47,8 +47,8 @@ def test_rendering_changes_no_metric_and_no_run_folder(runs):
 def test_the_animation_shows_the_scene_moving(runs):
     path = RunFolder(runs["1"].parent).animation(2)
     frames = gif_frames(path)
-    assert frames[0].shape == (hersd.render.HEIGHT, hersd.render.WIDTH, 3)
-    assert len(frames) == 2 * (50 // hersd.render.FRAME_STEP + 1)  # 2 episodes: the start and every 2nd step
+    assert frames[0].shape == (hersd.engine.render.HEIGHT, hersd.engine.render.WIDTH, 3)
+    assert len(frames) == 2 * (50 // hersd.engine.render.FRAME_STEP + 1)  # 2 episodes: the start and every 2nd step
     assert all(frame.std() > 20 for frame in frames[::10])  # not blank: table, robot, floor
     assert all(frame.std() > 20 for frame in gif_frames(RunFolder(runs["1"].parent).animation(1))[::10])
     assert np.abs(frames[0].astype(int) - frames[len(frames) // 4]).mean() > 0.5  # the arm moved
@@ -95,7 +95,7 @@ def test_a_failed_render_is_a_warning_and_the_run_goes_on(tmp_path, monkeypatch,
     def fail(*args, **kwargs):
         raise RenderError("no headless OpenGL for MuJoCo (EGL and OSMesa both failed); apt-get install libosmesa6")
 
-    monkeypatch.setattr(hersd.train, "render_policy", fail)
+    monkeypatch.setattr(hersd.engine.train, "render_policy", fail)
     log = train(compose_train([*RUN, "epochs=1", "render_every=1", f"results_dir={tmp_path}"]))
     err = capsys.readouterr().err
     assert err.count("warning:") == 1 and "epoch 1: no policy animation: no headless OpenGL" in err
@@ -107,14 +107,14 @@ def test_headless_rendering_picks_egl_then_osmesa_else_names_the_packages(monkey
     monkeypatch.delenv("MUJOCO_GL")
     monkeypatch.delenv("DISPLAY", raising=False)
     for works, expected in ((lambda backend: True, "egl"), (lambda backend: backend == "osmesa", "osmesa")):
-        hersd.render._first_working_backend.cache_clear()
-        monkeypatch.setattr(hersd.render, "_backend_works", works)
-        assert headless_backend() == expected == hersd.render.os.environ.pop("MUJOCO_GL")
-    hersd.render._first_working_backend.cache_clear()
-    monkeypatch.setattr(hersd.render, "_backend_works", lambda backend: False)
+        hersd.engine.render._first_working_backend.cache_clear()
+        monkeypatch.setattr(hersd.engine.render, "_backend_works", works)
+        assert headless_backend() == expected == hersd.engine.render.os.environ.pop("MUJOCO_GL")
+    hersd.engine.render._first_working_backend.cache_clear()
+    monkeypatch.setattr(hersd.engine.render, "_backend_works", lambda backend: False)
     with pytest.raises(RenderError, match="apt-get install libegl1 libgl1-mesa-dri .EGL. or libosmesa6"):
         headless_backend()
-    hersd.render._first_working_backend.cache_clear()
+    hersd.engine.render._first_working_backend.cache_clear()
     monkeypatch.setenv("MUJOCO_GL", "osmesa")  # the user's choice is kept
     assert headless_backend() == "osmesa"
 
@@ -142,9 +142,9 @@ def test_a_render_env_collected_late_leaves_later_renders_alone():
 def test_every_committed_log_gives_back_the_config_of_its_folder():
     """hersd-render reads a run's config from its log: for every committed log (the paper's kinds log the flat
     schema's fields besides their own) that config maps to the log's own folder."""
-    from hersd.render import config_from_log
-    from hersd.runlog import read_run
-    from hersd.runstore import run_dir
+    from hersd.engine.render import config_from_log
+    from hersd.contract.runlog import read_run
+    from hersd.contract.runstore import run_dir
 
     results = Path(__file__).resolve().parent.parent / "results"
     logs = sorted(results.rglob("run.mcap"))

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hersd.envs.goal_envs import goal_reward
-from hersd.replay.buffer import EpisodeBuffer, Episodes, sample_transitions
+from hersd.engine.envs.goal_envs import goal_reward
+from hersd.engine.replay.buffer import EpisodeBuffer, Episodes, sample_transitions
 
 T, N_EPISODES = 50, 40
 

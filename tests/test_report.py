@@ -80,7 +80,7 @@ def test_the_report_page_shows_a_short_list_of_permutation_tests(tmp_path):
 def test_the_decay_against_the_constant_at_its_mean_rate_is_a_table_file_and_a_page_section(tmp_path):
     """linear b1=0.5 over K = 6 and the constant 17/24 (its mu_eps), two seeds each: equal_mu_tests.csv holds a row
     per outcome, summary.csv their mu_eps, the page the section; the Fig. 12 file keeps its name."""
-    from hersd.config import ScheduleConfig
+    from hersd.contract.config import ScheduleConfig
 
     for seed in (0, 1):
         write_run(tmp_path / "logs" / f"linear{seed}", make_config(schedule=ScheduleConfig("linear", beta1=0.5),
@@ -264,7 +264,7 @@ def _paper_and_smoke(folder: Path, smoke: bool) -> None:
     FetchPickAndPlace whose two runs are both in progress (epoch 3 of 200), and with ``smoke`` the quick start's
     sweep: FetchReach HER and linear b1=0.25 at K = 4, 2 seeds each."""
     from analysis.load import PAPER_EPOCHS
-    from hersd.config import ScheduleConfig
+    from hersd.contract.config import ScheduleConfig
 
     linear = ScheduleConfig("linear", beta1=0.25)
     for seed in (0, 1):

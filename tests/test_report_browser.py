@@ -19,7 +19,7 @@ import pytest
 from analysis.figures import SMALLEST_FONT
 from analysis.report import DPI, build_report
 from analysis.synthetic import write_animation, write_run
-from hersd.config import ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import ScheduleConfig, TaskConfig, TrainConfig
 
 CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",

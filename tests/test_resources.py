@@ -1,5 +1,5 @@
 """threads=auto: the cores a run may use (affinity, SLURM_CPUS_PER_TASK), shared among the runs
-in flight, never more than other processes leave idle (hersd/resources.py)."""
+in flight, never more than other processes leave idle (hersd/contract/cores.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from hersd import resources
-from hersd.resources import available_cores, idle_cores, resolve_threads
+from hersd.contract import cores as shared_cores
+from hersd.contract.cores import available_cores, idle_cores, resolve_threads
 
 
 def test_slurm_cpus_per_task_caps_the_cores(monkeypatch):
@@ -26,8 +26,8 @@ def test_slurm_cpus_per_task_caps_the_cores(monkeypatch):
 def test_idle_cores_add_up_the_idle_share_of_each_core(monkeypatch):
     samples = iter([{0: (100, 1000), 1: (500, 1000)},    # (idle + iowait, total) jiffies
                     {0: (100, 1100), 1: (600, 1100)}])   # cpu0 fully busy, cpu1 fully idle
-    monkeypatch.setattr(resources, "_affinity", lambda: [0, 1])
-    monkeypatch.setattr(resources, "_cpu_times", lambda cpus: next(samples))
+    monkeypatch.setattr(shared_cores, "_affinity", lambda: [0, 1])
+    monkeypatch.setattr(shared_cores, "_cpu_times", lambda cpus: next(samples))
     monkeypatch.delenv("SLURM_CPUS_PER_TASK", raising=False)
     assert idle_cores(seconds=0.0) == pytest.approx(1.0)
 
@@ -40,8 +40,8 @@ def test_idle_cores_add_up_the_idle_share_of_each_core(monkeypatch):
     (8, 2.6, 2, 3),    # ... but take no more than the idle ones
 ])
 def test_auto_takes_the_share_of_idle_cores(monkeypatch, cores, idle, concurrent, expected):
-    monkeypatch.setattr(resources, "available_cores", lambda: cores)
-    monkeypatch.setattr(resources, "idle_cores", lambda seconds=0.0: idle)
+    monkeypatch.setattr(shared_cores, "available_cores", lambda: cores)
+    monkeypatch.setattr(shared_cores, "idle_cores", lambda seconds=0.0: idle)
     assert resolve_threads("auto", concurrent) == expected
     assert resolve_threads("3", concurrent) == 3  # an explicit count is used as given
 
@@ -63,10 +63,10 @@ def test_a_busy_neighbour_is_seen_on_the_real_machine():
 def test_a_lone_run_on_a_busy_machine_takes_only_the_idle_cores(tmp_path, monkeypatch):
     from helpers import TINY
 
-    from hersd.compose import compose_train
-    from hersd.runlog import read_run
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.contract.runlog import read_run
+    from hersd.engine.train import train
 
-    monkeypatch.setattr(resources, "idle_cores", lambda seconds=0.0: available_cores() - 1.0)
+    monkeypatch.setattr(shared_cores, "idle_cores", lambda seconds=0.0: available_cores() - 1.0)
     log = train(compose_train([*TINY, "epochs=1", "quiet=true", "threads=auto", f"results_dir={tmp_path}"]))
     assert read_run(log).meta["threads"] == max(1, available_cores() - 1)

@@ -30,7 +30,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from hersd.runlog import CHANNELS, LIBRARY, META_FIELDS, RunLogError, RunLogWriter, read_records, read_run, rewritten
+from hersd.contract.runlog import CHANNELS, LIBRARY, META_FIELDS, RunLogError, RunLogWriter, read_records, read_run, rewritten
 from runlogs import META, epoch_record, write_old_format
 from servers import unavailable
 
@@ -50,7 +50,7 @@ import sys
 from pathlib import Path
 sys.path.insert(0, {str(Path(__file__).parent)!r})
 from runlogs import META, epoch_record
-from hersd.runlog import RunLogWriter
+from hersd.contract.runlog import RunLogWriter
 writer = RunLogWriter(Path(sys.argv[1]), META)
 for epoch in range(1, 100000):
     writer.write_epoch(epoch_record(epoch))
@@ -282,8 +282,8 @@ class StopHere(Exception):
 def test_a_run_stopped_under_the_earlier_format_resumes_into_the_current_one(tmp_path):
     """A training run whose log is in the earlier format (killed: no footer) resumes with the current hersd:
     the log becomes the current format with every earlier message identical in content and times."""
-    from hersd.compose import compose_train
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.engine.train import train
 
     args = ["task=reach", "task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1",
             "ddpg.batch_size=64", "epochs=3", "quiet=true", "threads=1", "render_every=0", "bias.epochs=[]",
@@ -314,8 +314,8 @@ def test_a_run_stopped_under_the_earlier_format_resumes_into_the_current_one(tmp
 def test_truncated_log_reads_back_its_complete_epochs(tmp_path, tiny):
     import pandas as pd
 
-    from hersd.compose import compose_train
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.engine.train import train
 
     log_path = train(compose_train([*tiny, "threads=1", "epochs=3"]))
     data = log_path.read_bytes()
@@ -333,8 +333,8 @@ def test_log_is_standard_mcap_whose_messages_follow_their_json_schemas(tmp_path,
     """Generic MCAP readers (summary-based, not hersd's) read the log; every message validates."""
     import jsonschema
 
-    from hersd.compose import compose_train
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.engine.train import train
 
     log_path = train(compose_train([*tiny, "threads=1", "epochs=2"]))
     with open(log_path, "rb") as stream:

@@ -1,4 +1,4 @@
-"""hersd/runstore.py, the run store: a run's identity and hash (a config or a log's config dict, however old),
+"""hersd/contract/runstore.py, the run store: a run's identity and hash (a config or a log's config dict, however old),
 its directory's name, and RunFolder: state from its files, policy animations, the lock and its holder's pid;
 keeping files aside, removing a directory a failed start left, checking results_dir."""
 
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from analysis.synthetic import write_run
-from hersd.compose import compose_train
-from hersd.config import ConfigError, TrainConfig, config_record
-from hersd.runstore import (CHECKPOINT_NAME, LOCK_NAME, NOT_HASHED, RunFolder, RunLockedError, check_writable,
+from hersd.contract.compose import compose_train
+from hersd.contract.config import ConfigError, TrainConfig, config_record
+from hersd.contract.runstore import (CHECKPOINT_NAME, LOCK_NAME, NOT_HASHED, RunFolder, RunLockedError, check_writable,
                             config_hash, keep_aside, remove_if_unused, run_dir, run_identity)
 
 
@@ -54,7 +54,7 @@ def test_the_lock_records_its_holders_pid_while_held(tmp_path):
     assert RunFolder(tmp_path).holder() is None
     with RunFolder(tmp_path).lock():
         assert RunFolder(tmp_path).holder() == os.getpid()
-        code = f"from hersd.runstore import RunFolder; from pathlib import Path\nwith RunFolder(Path({str(tmp_path)!r})).lock(): pass"
+        code = f"from hersd.contract.runstore import RunFolder; from pathlib import Path\nwith RunFolder(Path({str(tmp_path)!r})).lock(): pass"
         taken = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
         assert f"being run by another process (pid {os.getpid()})" in taken.stderr  # and it kept the pid
         assert RunFolder(tmp_path).holder() == os.getpid()

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from hersd.config import ScheduleConfig
-from hersd.schedules import mean_rate_approx, mean_rate_exact
+from hersd.contract.config import ScheduleConfig
+from hersd.contract.schedules import mean_rate_approx, mean_rate_exact
 
 
 def test_constant_rate_is_eps_every_epoch():
@@ -64,9 +64,9 @@ def test_success_schedule_by_hand():
 def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exactly(tmp_path):
     from helpers import TINY, metrics
 
-    from hersd.compose import compose_train
-    from hersd.runlog import read_run
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.contract.runlog import read_run
+    from hersd.engine.train import train
 
     # A 0.15 m success radius: FetchReach's goals lie within 0.15 m of the gripper's start, so
     # even the barely trained policy succeeds in some train episodes and the rate moves.
@@ -98,7 +98,7 @@ def test_success_schedule_follows_its_formula_on_logged_success_and_resumes_exac
 
 
 def test_train_help_states_every_schedules_formula_and_settings(capsys):
-    from hersd.cli import main
+    from hersd.engine.cli import main
 
     main(["--help"])
     out = capsys.readouterr().out
@@ -120,7 +120,7 @@ def test_cosine_runs_from_start_to_end_and_its_exact_mean_rate_is_its_formulas()
 
 def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
     from analysis.synthetic import write_run
-    from hersd.config import ConfigError, TrainConfig
+    from hersd.contract.config import ConfigError, TrainConfig
 
     inline = TrainConfig(schedule={"kind": "table", "rates": [0.9, 0.8, 0.7]}, epochs=3).schedule
     assert list(inline.epoch_rates(3)) == [0.9, 0.8, 0.7] and inline.exact_mean_rate(3) == pytest.approx(0.8)
@@ -140,7 +140,7 @@ def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
 
 
 # Strings equal to a kind's name that are not that kind: the env's info key and a column of success rates.
-NOT_KINDS = {("hersd/envs/make.py", "success"), ("hersd/render.py", "success"), ("analysis/metrics.py", "success")}
+NOT_KINDS = {("hersd/engine/envs/make.py", "success"), ("hersd/engine/render.py", "success"), ("analysis/metrics.py", "success")}
 
 
 def test_kind_names_are_literals_only_in_their_own_schedule_file():
@@ -148,7 +148,7 @@ def test_kind_names_are_literals_only_in_their_own_schedule_file():
     import ast
     from pathlib import Path
 
-    from hersd.schedules import SCHEDULES
+    from hersd.contract.schedules import SCHEDULES
 
     root = Path(__file__).resolve().parent.parent
     found = []
@@ -157,7 +157,7 @@ def test_kind_names_are_literals_only_in_their_own_schedule_file():
             name = path.relative_to(root).as_posix()
             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
                 if isinstance(node, ast.Constant) and node.value in SCHEDULES and (name, node.value) not in NOT_KINDS \
-                        and name != f"hersd/schedules/{node.value}.py":
+                        and name != f"hersd/contract/schedules/{node.value}.py":
                     found.append(f"{name}:{node.lineno} {node.value!r}")
     assert not found
 
@@ -167,8 +167,8 @@ def test_a_table_replaying_a_success_runs_log_computes_that_run_again(tmp_path):
     give the same run (same seed) epoch for epoch, in a folder of its own."""
     from helpers import TINY, metrics
 
-    from hersd.compose import compose_train
-    from hersd.train import train
+    from hersd.contract.compose import compose_train
+    from hersd.engine.train import train
 
     args = [*TINY, "quiet=true", "threads=1", "epochs=3", "task.distance_threshold=0.15", f"results_dir={tmp_path}"]
     adaptive = train(compose_train([*args, "schedule=success", "schedule.beta1=0.9", "schedule.window=1"]))
@@ -181,9 +181,9 @@ def test_an_exponential_schedule_with_beta2_0_is_the_linear_one_and_finds_its_co
     """+grid=beta's beta2 = 0 column: its runs are linear 0.25's, committed under linear-b1_0.25."""
     from pathlib import Path
 
-    from hersd.compose import compose_train
-    from hersd.runstore import run_dir
-    from hersd.schedules import Linear
+    from hersd.contract.compose import compose_train
+    from hersd.contract.runstore import run_dir
+    from hersd.contract.schedules import Linear
 
     made = [compose_train(["task=push", "seed=0", *schedule]) for schedule in (
         ["schedule.kind=exponential", "schedule.beta1=0.25", "schedule.beta2=0.0"], ["schedule=linear"])]

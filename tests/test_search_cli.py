@@ -10,8 +10,8 @@ from pathlib import Path
 from helpers import run_command
 from searches import FINISHED, load, run_meta, tiny_search
 
-from hersd.resources import available_cores
-from hersd.runlog import read_run
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
 from sweeps.search import cli
 
 CLI = "sweeps.search.cli:main"

@@ -8,7 +8,7 @@ import optuna
 import pytest
 from searches import fails_with, tiny_search
 
-from hersd.compose import group_options
+from hersd.contract.compose import group_options
 from sweeps.search.config import compose_search
 from sweeps.search.plan import make_plan
 from sweeps.search.study import open_study

@@ -11,8 +11,8 @@ import pytest
 from optuna.trial import TrialState
 from searches import fails_with, load, only_db, run_meta, tiny_search
 
-from hersd.resources import available_cores
-from hersd.runlog import read_run
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
 from sweeps.search import cli
 from sweeps.search.objective import TrialProgress
 
@@ -73,7 +73,7 @@ def test_a_resumed_run_reads_its_log_once_and_then_takes_each_epochs_record(tmp_
     import sys
     from types import ModuleType, SimpleNamespace
 
-    from hersd.runlog import EPOCH_FIELDS, RunLogWriter
+    from hersd.contract.runlog import EPOCH_FIELDS, RunLogWriter
     from sweeps.search import objective
 
     success = [0.1, 0.2, 0.4, 0.8]
@@ -94,8 +94,8 @@ def test_a_resumed_run_reads_its_log_once_and_then_takes_each_epochs_record(tmp_
     reads = []
     read_log = objective.metric_values
     monkeypatch.setattr(objective, "metric_values", lambda *args: reads.append(args[2:]) or read_log(*args))
-    monkeypatch.setitem(sys.modules, "hersd.train", ModuleType("hersd.train"))
-    sys.modules["hersd.train"].train = resume_at_3
+    monkeypatch.setitem(sys.modules, "hersd.engine.train", ModuleType("hersd.engine.train"))
+    sys.modules["hersd.engine.train"].train = resume_at_3
     study = optuna.create_study(direction="maximize")
     trial = study.ask()
     plan = SimpleNamespace(search=SimpleNamespace(metric="test_success", seeds=1), epochs=4, train_overrides=[],

@@ -8,10 +8,10 @@ import pytest
 from helpers import TINY
 from searches import fails_with, tiny_search
 
-from hersd.compose import compose_train
-from hersd.resources import available_cores, resolve_threads
-from hersd.runstore import config_hash, run_dir
-from hersd.study import param_overrides, trial_config
+from hersd.contract.compose import compose_train
+from hersd.contract.cores import available_cores, resolve_threads
+from hersd.contract.runstore import config_hash, run_dir
+from hersd.contract.study import param_overrides, trial_config
 from sweeps.search import plan as search_plan
 from sweeps.search.config import compose_search
 from sweeps.search.plan import make_plan

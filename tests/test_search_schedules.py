@@ -14,8 +14,8 @@ from optuna.trial import TrialState
 from searches import load, only_db, run_meta, tiny_search
 from user_schedules import MODULE, start, write_module
 
-from hersd.runstore import RunFolder, run_dir
-from hersd.study import trial_config
+from hersd.contract.runstore import RunFolder, run_dir
+from hersd.contract.study import trial_config
 from sweeps.search import cli
 from sweeps.search.config import compose_search
 from sweeps.search.plan import make_plan

@@ -13,7 +13,7 @@ from pathlib import Path
 from optuna.trial import TrialState
 from searches import FINISHED, _count_finished, load, tiny_search
 
-from hersd.runlog import read_run
+from hersd.contract.runlog import read_run
 from sweeps.search import cli
 
 

@@ -10,8 +10,8 @@ import pytest
 from optuna.trial import TrialState
 from searches import _count_finished, fails_with, load, only_db, run_meta, tiny_search
 
-import hersd.train
-from hersd.resources import available_cores
+import hersd.engine.train
+from hersd.contract.cores import available_cores
 from sweeps.search import cli, plan as search_plan, workers
 from sweeps.search.config import SlurmConfig
 
@@ -40,7 +40,7 @@ def test_slurm_problems_stop_the_search_at_start(sinfo: str, override: str, mess
 
 
 def test_crashed_run_fails_its_trial_and_the_study_goes_on(tmp_path: Path, monkeypatch) -> None:
-    real_train, real_compose = hersd.train.train, search_plan.compose_train
+    real_train, real_compose = hersd.engine.train.train, search_plan.compose_train
     calls, composed = [], []
 
     def crash_first(cfg, command="", on_epoch=None):
@@ -49,7 +49,7 @@ def test_crashed_run_fails_its_trial_and_the_study_goes_on(tmp_path: Path, monke
             raise RuntimeError("simulated crash")
         return real_train(cfg, command=command, on_epoch=on_epoch)
 
-    monkeypatch.setattr(hersd.train, "train", crash_first)
+    monkeypatch.setattr(hersd.engine.train, "train", crash_first)
     monkeypatch.setattr(search_plan, "compose_train", lambda overrides: composed.append(1) or real_compose(overrides))
     cli.main(["search.n_trials=2", "search.pruner.kind=none", "threads=1", *tiny_search(tmp_path, epochs=2)])
     study = load(only_db(tmp_path))

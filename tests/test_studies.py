@@ -10,7 +10,7 @@ import pytest
 
 from analysis.report import main as report_main
 from analysis.studies import open_study_storage
-from hersd.study import StudyStorageError
+from hersd.contract.study import StudyStorageError
 
 
 def _bad_storages(folder: Path) -> list[tuple[str, str]]:

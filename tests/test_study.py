@@ -1,4 +1,4 @@
-"""hersd/study.py, the study's contract: storage specs and their names, the trial parameters'
+"""hersd/contract/study.py, the study's contract: storage specs and their names, the trial parameters'
 encoding, the report command. (Opening storages: tests/test_search_storage.py for writing,
 tests/test_studies.py read-only.)"""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from hersd.study import (StudySettings, default_storage, report_command, storage_file, storage_location, storage_name,
+from hersd.contract.study import (StudySettings, default_storage, report_command, storage_file, storage_location, storage_name,
                          stored_params, trial_params)
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hersd.compose import compose
+from hersd.contract.compose import compose
 from sweeps.plan import SweepError, grid_stages, register_schemas, seed_by_seed
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
@@ -100,7 +100,7 @@ def test_seeds_sweeps_seed_unless_the_command_sets_it(tmp_path, args, seeds):
 
 
 CHECKED_SWEEP = """
-from hersd.config import config_record
+from hersd.contract.config import config_record
 from sweeps import plan
 from sweeps.launch import main
 

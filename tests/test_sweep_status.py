@@ -11,8 +11,8 @@ from unittest import mock
 import numpy as np
 
 from analysis.synthetic import write_run
-from hersd.config import TrainConfig
-from hersd.runstore import RunFolder
+from hersd.contract.config import TrainConfig
+from hersd.contract.runstore import RunFolder
 from sweeps.status import run_status
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]

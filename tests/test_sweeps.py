@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from hersd.resources import available_cores
-from hersd.runlog import read_run
-from hersd.runstore import RunFolder
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import RunFolder
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
@@ -50,7 +50,7 @@ def test_paper_grid_lists_the_papers_runs(tmp_path):
 
 
 def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
-    from hersd.schedules import mean_rate_exact
+    from hersd.contract.schedules import mean_rate_exact
 
     result = sweep("+grid=iso_mu", "--dry-run", "seeds=1", "task=push", f"results_dir={tmp_path}")
     runs = listed_runs(result.stdout)
@@ -95,7 +95,7 @@ def test_help_names_the_command_and_only_the_groups_a_sweep_takes():
 
 
 def test_the_local_launcher_runs_one_per_core_in_the_listed_order(tmp_path):
-    from hersd.compose import compose
+    from hersd.contract.compose import compose
     from sweeps.launch import register_schemas
 
     register_schemas()
@@ -216,7 +216,7 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
 
 def launcher_config(*overrides: str):
     """The composed ``hydra.launcher`` node of a sweep with these overrides."""
-    from hersd.compose import compose
+    from hersd.contract.compose import compose
     from sweeps.launch import register_schemas
 
     register_schemas()

@@ -11,12 +11,12 @@ import pandas as pd
 import pytest
 from helpers import TINY as TINY_RUN, metrics
 
-from hersd.cli import main
-from hersd.compose import compose_train as compose
-from hersd.resources import available_cores
-from hersd.runlog import read_run
-from hersd.runstore import RunFolder, RunLockedError, run_dir
-from hersd.train import train
+from hersd.engine.cli import main
+from hersd.contract.compose import compose_train as compose
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
+from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
+from hersd.engine.train import train
 
 TINY = [*TINY_RUN, "quiet=true", "threads=1"]
 
@@ -81,7 +81,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_metrics(tmp_path):
 
 def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
-    proc = subprocess.Popen([sys.executable, "-m", "hersd.cli", *args], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE, text=True)
     for line in proc.stdout:
         if line.startswith("epoch") and line.split()[1].startswith("2/"):
             os.kill(proc.pid, signal.SIGKILL)
@@ -91,7 +91,7 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     log_path = next((tmp_path / "cut").rglob("run.mcap"))
     killed = read_run(log_path)
     assert not killed.complete and 2 <= len(killed.epochs) <= 3
-    subprocess.run([sys.executable, "-m", "hersd.cli", *args], check=True, capture_output=True)
+    subprocess.run([sys.executable, "-m", "hersd.engine.cli", *args], check=True, capture_output=True)
     reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
     assert read_run(log_path).complete
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
@@ -99,7 +99,7 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
 
 def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resumes(tmp_path):
     args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
-    proc = subprocess.Popen([sys.executable, "-m", "hersd.cli", *args], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     for line in proc.stdout:
@@ -112,7 +112,7 @@ def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resu
     assert err.strip() == (f"hersd-train: interrupted; the finished epochs are kept in {log_path.parent}: "
                            "re-run the same command to resume")
     assert 1 <= len(read_run(log_path).epochs) <= 3
-    subprocess.run([sys.executable, "-m", "hersd.cli", *args], check=True, capture_output=True)
+    subprocess.run([sys.executable, "-m", "hersd.engine.cli", *args], check=True, capture_output=True)
     reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 

@@ -11,14 +11,14 @@ import pandas as pd
 import pytest
 from helpers import TINY, command
 
-from hersd.runlog import read_run
+from hersd.contract.runlog import read_run
 
 # A user's module: TD3 whose actor waits ``actor_start`` updates, its settings TD3's and that one.
 LATE = '''
 from dataclasses import dataclass
 
-from hersd.config import ConfigError, TD3Config
-from hersd.learners.td3 import TD3
+from hersd.contract.config import ConfigError, TD3Config
+from hersd.engine.learners.td3 import TD3
 
 
 @dataclass
@@ -47,7 +47,7 @@ def test_a_learner_outside_the_package_trains_sweeps_and_is_reported(tmp_path):
     (tmp_path / "user_late.py").write_text(LATE)
     results = tmp_path / "results"
     run = [*TINY, "epochs=1", f"results_dir={results}", "learner._target_=user_late.TD3Late", "threads=1"]
-    trained = command("hersd.cli:main", [*run, "learner.td3late.actor_start=2", "quiet=true"], tmp_path)
+    trained = command("hersd.engine.cli:main", [*run, "learner.td3late.actor_start=2", "quiet=true"], tmp_path)
     log_path = Path(trained.stdout.strip().splitlines()[-1])
     assert log_path.parent.parent.parent.name == "td3late-her"
     settings = {"policy_noise": 0.2, "noise_clip": 0.5, "policy_delay": 2, "actor_start": 2}
@@ -65,7 +65,7 @@ def test_a_learner_outside_the_package_trains_sweeps_and_is_reported(tmp_path):
 @pytest.fixture
 def user_late(tmp_path, monkeypatch):
     """The user's module importable in this process; forgotten (and its learner unregistered) afterwards."""
-    from hersd.learners import LEARNERS
+    from hersd.engine.learners import LEARNERS
 
     (tmp_path / "user_late.py").write_text(LATE)
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -75,7 +75,7 @@ def user_late(tmp_path, monkeypatch):
 
 
 def test_a_learner_declared_by_an_entry_point_is_selected_by_its_name(user_late):
-    from hersd.config import TrainConfig
+    from hersd.contract.config import TrainConfig
 
     dist = user_late / "user_late-1.0.dist-info"
     dist.mkdir()
@@ -86,7 +86,7 @@ def test_a_learner_declared_by_an_entry_point_is_selected_by_its_name(user_late)
 
 
 def test_a_setting_the_learner_lacks_is_one_line(user_late):
-    from hersd.config import ConfigError, TrainConfig
+    from hersd.contract.config import ConfigError, TrainConfig
 
     with pytest.raises(ConfigError, match=r"^learner\.td3late\.start is not a setting; its settings: policy_noise, "
                                           r"noise_clip, policy_delay, actor_start$"):

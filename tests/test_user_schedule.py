@@ -8,14 +8,14 @@ from pathlib import Path
 
 from helpers import TINY, command
 
-from hersd.runlog import read_run
+from hersd.contract.runlog import read_run
 
 # A user's module: Step declares no kind, so it is selected and recorded by its path; RegisteredStep is
 # the same schedule under the name an entry point gives it.
 STEPS = '''
 from dataclasses import dataclass
 
-from hersd.schedules import Schedule, param
+from hersd.contract.schedules import Schedule, param
 
 
 @dataclass
@@ -46,7 +46,7 @@ def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(t
     (tmp_path / "user_steps.py").write_text(STEPS)
     results = tmp_path / "results"
     run = [*TINY, "epochs=2", f"results_dir={results}", "schedule._target_=user_steps.Step"]
-    trained = command("hersd.cli:main", [*run, "schedule.low=0.4", "quiet=true", "threads=1"], tmp_path)
+    trained = command("hersd.engine.cli:main", [*run, "schedule.low=0.4", "quiet=true", "threads=1"], tmp_path)
     log = read_run(Path(trained.stdout.strip().splitlines()[-1]))
     assert Path(trained.stdout.strip()).parent.parent.name == "step-0.9_0.4"
     assert log.meta["config"]["schedule"] == {"kind": "user_steps.Step", "high": 0.9, "low": 0.4}
@@ -69,8 +69,8 @@ def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(t
 
 
 def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
-    from hersd.config import TrainConfig
-    from hersd.schedules import known_kinds
+    from hersd.contract.config import TrainConfig
+    from hersd.contract.schedules import known_kinds
 
     (tmp_path / "user_steps.py").write_text(STEPS)
     dist = tmp_path / "user_steps-1.0.dist-info"
@@ -89,7 +89,7 @@ def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):
 def test_a_rate_outside_0_1_is_refused_in_one_line_before_any_work(tmp_path):
     from user_schedules import MODULE, command, write_module
 
-    refused = command("hersd.cli:main", [*TINY, f"results_dir={tmp_path / 'results'}", f"schedule._target_={MODULE}.Over"],
+    refused = command("hersd.engine.cli:main", [*TINY, f"results_dir={tmp_path / 'results'}", f"schedule._target_={MODULE}.Over"],
                       write_module(tmp_path), code=2)
     assert refused.stderr == ("hersd-train: error: schedule over high=1.4 low=0.5 k0=1: its rate at epoch 1 of 200 is "
                               f"1.4, not in [0, 1]; fix {MODULE}.Over.rate\n")
@@ -100,7 +100,7 @@ def test_an_adaptive_rate_outside_0_1_stops_its_run_at_that_epoch_keeping_the_fi
     from user_schedules import MODULE, command, write_module
 
     results = tmp_path / "results"
-    stopped = command("hersd.cli:main", [*TINY, "epochs=3", "quiet=true", "threads=1", f"results_dir={results}",
+    stopped = command("hersd.engine.cli:main", [*TINY, "epochs=3", "quiet=true", "threads=1", f"results_dir={results}",
                                          f"schedule._target_={MODULE}.LateOver"], write_module(tmp_path), code=2)
     assert stopped.stderr.count("\n") == 1 and "its rate at epoch 2 of 3 is 1.4, not in [0, 1]" in stopped.stderr
     (log,) = results.glob("reach/her/lateover/seed0-*/run.mcap")
@@ -110,8 +110,8 @@ def test_an_adaptive_rate_outside_0_1_stops_its_run_at_that_epoch_keeping_the_fi
 def test_tag_and_label_default_to_the_class_name_and_its_settings(tmp_path, monkeypatch):
     from user_schedules import MODULE, write_module
 
-    from hersd.config import TrainConfig
-    from hersd.runstore import run_dir
+    from hersd.contract.config import TrainConfig
+    from hersd.contract.runstore import run_dir
 
     monkeypatch.syspath_prepend(str(write_module(tmp_path)))
     cfg = TrainConfig(schedule={"_target_": f"{MODULE}.KStep", "low": 0.4, "k0": 3.0}, epochs=4)
@@ -123,7 +123,7 @@ def test_tag_and_label_default_to_the_class_name_and_its_settings(tmp_path, monk
 def test_train_help_lists_the_settings_of_the_class_the_command_names(tmp_path):
     from user_schedules import MODULE, command, write_module
 
-    shown = command("hersd.cli:main", [f"schedule._target_={MODULE}.KStep", "--help"], write_module(tmp_path)).stdout
+    shown = command("hersd.engine.cli:main", [f"schedule._target_={MODULE}.KStep", "--help"], write_module(tmp_path)).stdout
     listed = shown[shown.index(f"  {MODULE}.KStep: eps(k) = high for k <= k0, low after"):]
     assert "schedule.k0=1" in listed and "the last epoch at the high rate" in listed
 

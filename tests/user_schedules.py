@@ -16,7 +16,7 @@ MODULE = "newcomer_steps"
 SOURCE = '''
 from dataclasses import dataclass
 
-from hersd.schedules import Schedule, param
+from hersd.contract.schedules import Schedule, param
 
 
 @dataclass

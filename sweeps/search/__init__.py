@@ -5,7 +5,7 @@ Modules, each importing only those before it: ``storage`` (opening a study stora
 writing), ``config`` (the SearchConfig schema and its checks), ``plan`` (what every worker receives; a trial's run configs), ``study``
 (create/load, sampler, pruner, lost trials), ``objective`` (one trial's runs, reports and
 pruning), ``workers`` (local processes, SLURM), ``cli`` (the command). Where a study lives,
-what a trial's parameters are and what the study records for the report: :mod:`hersd.study`
+what a trial's parameters are and what the study records for the report: :mod:`hersd.contract.study`
 (which analysis reads too, opening storages read-only itself).
 """
 

@@ -17,8 +17,8 @@ from typing import NoReturn
 import optuna
 from optuna.storages import BaseStorage
 
-from hersd.config import ConfigError
-from hersd.study import report_command, shown, storage_file
+from hersd.contract.config import ConfigError
+from hersd.contract.study import report_command, shown, storage_file
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan

@@ -2,7 +2,7 @@
 ``search/search_schema``, which every ``conf/search/*.yaml`` lists first), its range checks,
 and its composition from ``conf/search/<name>.yaml`` plus ``search.*`` overrides.
 
-Every check raises :class:`hersd.config.ConfigError` with one line naming the field.
+Every check raises :class:`hersd.contract.config.ConfigError` with one line naming the field.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, Optional
 
-from hersd.compose import compose, explain_config_error, group_options, register_schema as store_schema
-from hersd.config import ConfigError
-from hersd.resources import available_cores
-from hersd.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
-from hersd.schedules import Exponential, known_kinds, schedule_class
-from hersd.study import JOURNAL_PREFIX, kind_params, schedule_config, searchable, stored_params
+from hersd.contract.compose import compose, explain_config_error, group_options, register_schema as store_schema
+from hersd.contract.config import ConfigError
+from hersd.contract.cores import available_cores
+from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
+from hersd.contract.schedules import Exponential, known_kinds, schedule_class
+from hersd.contract.study import JOURNAL_PREFIX, kind_params, schedule_config, searchable, stored_params
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")
@@ -42,7 +42,7 @@ class Bounds:
 class SpaceConfig:
     """What the search draws: the schedule kinds and each parameter's range."""
 
-    # schedule kinds searched (a categorical if > 1): registered names or class paths (hersd.schedules)
+    # schedule kinds searched (a categorical if > 1): registered names or class paths (hersd.contract.schedules)
     kinds: list[str] = field(default_factory=lambda: [Exponential.kind])
     beta1: Bounds = field(default_factory=lambda: Bounds(0.0, 1.0))  # eq. 9 final drop, within [0, 1]
     beta2: Bounds = field(default_factory=lambda: Bounds(-2.0, 2.0))  # eq. 9 shape (exponential kind only)
@@ -150,7 +150,7 @@ def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
 
 
 def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
-    """The schedule's own checks (:class:`hersd.config.ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
+    """The schedule's own checks (:class:`hersd.contract.config.ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
     try:
         schedule_config({**params, "kind": kind})
     except ConfigError as err:
@@ -232,7 +232,7 @@ def taken_by(params: dict[str, Any], kinds: list[str]) -> bool:
 
 
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
-    """An enqueued set as Optuna stores it (:func:`hersd.study.stored_params`), its kind inferred."""
+    """An enqueued set as Optuna stores it (:func:`hersd.contract.study.stored_params`), its kind inferred."""
     return stored_params({"kind": enqueued_kind(params, kinds), **params}, kinds)
 
 

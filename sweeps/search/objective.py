@@ -1,5 +1,5 @@
 """One trial: draw its schedule, train its runs (one per seed, in turn) through
-:func:`hersd.train.train`, and report its running objective after every epoch so that the
+:func:`hersd.engine.train.train`, and report its running objective after every epoch so that the
 pruner can stop it there (a stopped run stays resumable).
 
 The running objective is the mean over the seeds already finished plus the current seed's
@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 import optuna
 
-from hersd.config import ConfigError, TrainConfig
-from hersd.runlog import read_records
-from hersd.runstore import RunFolder, RunLockedError, run_dir
-from hersd.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, one_line, mean_rates, param_overrides, trial_config
+from hersd.contract.config import ConfigError, TrainConfig
+from hersd.contract.runlog import read_records
+from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
+from hersd.contract.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, one_line, mean_rates, param_overrides, trial_config
 from sweeps.search.config import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
 from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR
@@ -119,7 +119,7 @@ def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, p
                cfg: TrainConfig, seed_index: int) -> None:
     """Train (or resume, or find complete) one run of the trial in its folder ``cfg.run_dir``, reporting
     each epoch from the record training hands over; record its objective."""
-    from hersd.train import train  # torch and MuJoCo: only in the processes that train
+    from hersd.engine.train import train  # torch and MuJoCo: only in the processes that train
 
     metric, epochs = plan.search.metric, plan.epochs
     log_path = RunFolder(Path(cfg.run_dir)).log

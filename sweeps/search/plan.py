@@ -3,9 +3,9 @@ are made from it.
 
 The training config is composed once, from the command's training overrides, into
 ``plan.base``; a trial's run is ``base`` with the trial's schedule, ``algo.lambda_h`` when
-searched, the seed and the thread count replaced (:func:`hersd.study.trial_config`). Its
+searched, the seed and the thread count replaced (:func:`hersd.contract.study.trial_config`). Its
 directory and hash are those ``hersd-train`` gives for the equivalent overrides
-(:func:`hersd.study.param_overrides`).
+(:func:`hersd.contract.study.param_overrides`).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from hersd.compose import compose_train
-from hersd.config import ConfigError, ScheduleConfig, TrainConfig
-from hersd.resources import resolve_threads
-from hersd.runstore import check_writable, config_hash
-from hersd.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
+from hersd.contract.compose import compose_train
+from hersd.contract.config import ConfigError, ScheduleConfig, TrainConfig
+from hersd.contract.cores import resolve_threads
+from hersd.contract.runstore import check_writable, config_hash
+from hersd.contract.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
 from sweeps.search.storage import resolve_storage
 from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds, space_record
 
@@ -36,7 +36,7 @@ class SearchPlan:
     base: TrainConfig  # the composed training config every run of every trial starts from
     train_overrides: list[str]  # the command's training overrides (recorded with the study and each run)
     study_name: str
-    storage: str  # the storage spec workers open (see hersd.study)
+    storage: str  # the storage spec workers open (see hersd.contract.study)
     settings: StudySettings  # what the objective depends on; stored with the study and checked on load
     study_dir: str  # <results_dir>/search/<study>/: SLURM job logs
 

@@ -1,9 +1,9 @@
-"""Opening a study storage for writing: the search's side of the study contract (:mod:`hersd.study`
+"""Opening a study storage for writing: the search's side of the study contract (:mod:`hersd.contract.study`
 names storages and encodes trials; :mod:`analysis.studies` opens them read-only for the report).
 
 :func:`resolve_storage` checks a spec without connecting; :func:`open_storage` opens it, creating
 a missing file or Optuna's tables: a journal file, SQLite with a claim lock, PostgreSQL and other
-SQLAlchemy URLs. Every failure is a :class:`hersd.study.StudyStorageError` with one line.
+SQLAlchemy URLs. Every failure is a :class:`hersd.contract.study.StudyStorageError` with one line.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import functools
 from pathlib import Path
 from typing import Any
 
-from hersd.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, SQLITE_PREFIX, StudyStorageError, connect_args, one_line,
+from hersd.contract.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, SQLITE_PREFIX, StudyStorageError, connect_args, one_line,
                          shown, storage_file, storage_location, storage_name, with_driver)
 
 SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing

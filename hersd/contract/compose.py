@@ -1,0 +1,86 @@
+"""Hydra composition for the commands that compose configs (hersd-train, -sweep, -search).
+
+The YAML configs ship inside the package as ``hersd.conf`` (the repository's top-level
+``conf/``, mapped into the wheel by pyproject.toml), so every command finds them through the
+search path :data:`CONFIG_PATH` from any folder, editable install or not. Light: no torch.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from omegaconf import DictConfig
+
+from hersd.contract.config import ConfigError, TrainConfig, to_train_config
+
+CONFIG_MODULE = "hersd.conf"
+CONFIG_PATH = f"pkg://{CONFIG_MODULE}"
+
+
+def register_schema(name: str, node: Any, group: str | None = None) -> None:
+    """Put a dataclass schema in Hydra's ConfigStore, where YAML defaults lists can name it."""
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(name=name, node=node, group=group)
+
+
+def open_schedule(schema: type) -> DictConfig:
+    """A training schema as a config whose ``schedule`` and ``learner`` nodes take any key: each schedule kind and
+    each learner has settings of its own, which its class checks when the config is built (:mod:`hersd.contract.schedules`,
+    :func:`hersd.contract.config.learner_from_config`)."""
+    from omegaconf import OmegaConf
+
+    node = OmegaConf.structured(schema)
+    OmegaConf.set_struct(node.schedule, False)
+    OmegaConf.set_struct(node.learner, False)
+    return node
+
+
+def register_train_schema() -> None:
+    """``train_schema``, which conf/train.yaml lists first."""
+    register_schema("train_schema", open_schedule(TrainConfig))
+
+
+def compose(config_name: str | None, overrides: list[str], job_name: str, with_hydra: bool = False) -> DictConfig:
+    """The named config (or none: only the overrides' groups) composed with command-line overrides;
+    ``with_hydra`` keeps the ``hydra`` node (launcher, sweeper)."""
+    from hydra import compose as hydra_compose, initialize_config_module
+
+    with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3", job_name=job_name):
+        return hydra_compose(config_name=config_name, overrides=overrides, return_hydra_config=with_hydra)
+
+
+def compose_train(overrides: list[str]) -> TrainConfig:
+    """``conf/train.yaml`` with Hydra command-line overrides -> validated TrainConfig."""
+    register_train_schema()
+    return to_train_config(compose("train", overrides, job_name="hersd-train"))
+
+
+def group_options(group: str) -> list[str]:
+    """The config names of a group (e.g. ``task`` -> ``[pick_and_place, push, reach, slide]``)."""
+    from importlib.resources import files
+
+    folder = files(CONFIG_MODULE).joinpath(*group.split("/"))
+    return sorted(entry.name.removesuffix(".yaml") for entry in folder.iterdir() if entry.name.endswith(".yaml")) \
+        if folder.is_dir() else []
+
+
+def explain_config_error(err: Exception, what: str = "config field", see: str = "hersd-train --help") -> str:
+    """Hydra/OmegaConf composition errors -> one line naming the field and the choices."""
+    from hydra.errors import MissingConfigException
+    from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
+
+    if isinstance(err, ConfigError):
+        return str(err)
+    if isinstance(err, MissingConfigException) and err.missing_cfg_file:
+        group, _, value = err.missing_cfg_file.partition("/")
+        choices = sorted(err.options) if err.options is not None else group_options(group)
+        return (f"{group}={value} is not a known {group}" if value else f"{err.missing_cfg_file} is unknown") + \
+            (f"; choose one of: {', '.join(choices)}" if choices else "")
+    cause = err.__cause__ if err.__cause__ is not None else err
+    key = getattr(cause, "full_key", None)
+    if isinstance(cause, (ConfigAttributeError, ConfigKeyError)) and key:
+        return f"{key} is not a {what}; see {see}"
+    if isinstance(cause, ValidationError) and key:
+        return f"{key}: {str(cause).splitlines()[0]}"
+    return " ".join(str(err).split())

@@ -1,0 +1,50 @@
+"""Learner classes by name (docs/LEARNERS.md), for the config as for the run engine, importing none of them
+(and so not torch) until one is asked for.
+
+Every :class:`hersd.engine.learners.GoalConditionedLearner` subclass that declares a ``NAME`` registers itself in
+:data:`LEARNERS` when its module is imported (importing :mod:`hersd.engine.learners` registers the package's). A
+name is found there, then among the entry points of the group ``hersd.learners``, then as a class path
+``<module>.<Class>`` (``learner._target_``), the way schedules are found (:mod:`hersd.contract.schedules.registry`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from importlib.metadata import entry_points
+from typing import Any
+
+from hersd.contract.errors import ConfigError
+
+LEARNERS: dict[str, type] = {}  # NAME -> learner class, filled as the classes are defined
+ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
+
+
+def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
+    """The learner class a ``learner=`` name or class path selects; ConfigError (one line, listing ``known``
+    and the registered names) if none, or if it declares SETTINGS that are not a dataclass."""
+    cls = LEARNERS.get(name)
+    if cls is None and (found := entry_points(group=ENTRY_POINT_GROUP, name=name)):
+        cls = next(iter(found)).load()
+    if cls is None and "." in name:
+        module, _, class_name = name.rpartition(".")
+        try:
+            cls = getattr(importlib.import_module(module), class_name)
+        except (ImportError, AttributeError) as err:
+            raise ConfigError(f"learner class {name} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+    if cls is None:
+        names = sorted({*known, *LEARNERS, *(point.name for point in entry_points(group=ENTRY_POINT_GROUP))})
+        raise ConfigError(f"learner={name!r} is unknown; choose one of: {', '.join(names)}, "
+                          "or a class: learner._target_=<module>.<Class>")
+    settings = getattr(cls, "SETTINGS", None)
+    if not isinstance(cls, type) or not callable(getattr(cls, "build", None)):
+        raise ConfigError(f"learner {name} is not a hersd.engine.learners.GoalConditionedLearner subclass")
+    if settings is not None and not dataclasses.is_dataclass(settings):
+        raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {settings!r}")
+    return cls
+
+
+def recorded_name(cls: type) -> str:
+    """The name a learner class's runs record (``learner.name`` of their logs): the ``NAME`` it declares itself
+    (not one it inherits: a subclass of TD3 is not TD3), else its import path."""
+    return cls.__dict__.get("NAME") or f"{cls.__module__}.{cls.__qualname__}"

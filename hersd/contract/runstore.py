@@ -1,0 +1,193 @@
+"""The run store: where a run lives and what state it is in, shared by training, sweeps and
+the search. Light (no torch): a sweep plans hundreds of runs with it.
+
+``<results_dir>/<task>/<algo>/<schedule>/seed<N>-<hash>/`` (``<learner>-<algo>`` for learners but ddpg) holds
+
+- ``run.mcap``        the run's log (:mod:`hersd.contract.runlog`), the contract with the analysis;
+- ``checkpoint.pt``   an exact-resume checkpoint (:mod:`hersd.engine.run_state`), removed when done;
+- ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
+                      it holds that process's pid while held (:meth:`RunFolder.holder`);
+- ``policy/epoch_<k>.gif``  an animation of the policy's test episodes after epoch k (:mod:`hersd.engine.render`);
+- ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
+
+The hash covers every config field that changes what the run computes
+(:data:`NOT_HASHED` lists the others), so two configs never share a directory and the same
+config always maps to the same one: that is what lets sweeps skip and resume runs.
+:func:`run_identity` is that identity, for a config or for the config a log's metadata holds
+(however old the log): the report groups runs with it too.
+"""
+
+from __future__ import annotations
+
+import copy
+import fcntl
+import hashlib
+import json
+import os
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+from hersd.contract.config import ConfigError, TrainConfig, config_record, learner_key
+from hersd.contract.runlog import LOG_NAME, RunLogError, RunRecords, read_records
+
+CHECKPOINT_NAME = "checkpoint.pt"
+LOCK_NAME = "run.lock"
+POLICY_DIR = "policy"  # the run's policy animations: policy/epoch_<k>.gif
+# Fields that change where, how loudly or how fast a run is written, not what it computes.
+NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device",
+              "flush_denormal", "render_every", "bias")
+# Fields added to the schema after runs were made: left out of the hash while they hold this
+# value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
+HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0, "precision": "fp32"}
+
+
+class RunLockedError(RuntimeError):
+    """Another process is running the same configuration."""
+
+
+def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
+    """What identifies a run: its config as a nested dict, less :data:`NOT_HASHED` and the
+    :data:`HASHED_UNLESS` defaults; of ``learner`` only the learner in use and its settings (the one object
+    its class declares and its ``build`` reads, :class:`hersd.contract.config.LearnerConfig`), and nothing for ddpg (the learner of every run made before learners were a setting).
+
+    ``config`` is a TrainConfig or its dict as a log's ``/run/meta`` holds it; a log written
+    before a field existed has the identity of a new log of the same run.
+    """
+    content = config_record(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
+    content = {key: value for key, value in content.items() if key not in NOT_HASHED}
+    learner = content.pop("learner", {"name": "ddpg"})
+    name = learner["name"]
+    if name != "ddpg":  # a learner's settings are one object, under its name (hersd.contract.config.learner_record)
+        content["learner"] = {"name": name, **({name: learner[name]} if name in learner else {})}
+    for dotted, earlier_value in HASHED_UNLESS.items():
+        *parents, leaf = dotted.split(".")
+        node = content
+        for key in parents:
+            node = node.get(key, {})
+        if leaf in node and node[leaf] == earlier_value:
+            del node[leaf]
+    return content
+
+
+def config_hash(config: TrainConfig | dict[str, Any]) -> str:
+    """8 hex digits identifying everything that determines the run's result (:func:`run_identity`)."""
+    return hashlib.sha256(json.dumps(run_identity(config), sort_keys=True).encode()).hexdigest()[:8]
+
+
+def run_dir(cfg: TrainConfig) -> Path:
+    """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
+    if cfg.run_dir is not None:
+        return Path(cfg.run_dir)
+    algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{learner_key(cfg.learner.name)}-{cfg.algo.name}"
+    return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{config_hash(cfg)}"
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """One run's directory and its files, as training, rendering, the run store and a sweep's
+    status read them: the log, the checkpoint, the lock (and the pid of its holder), the policy
+    animations, the run's state and its epochs done."""
+
+    path: Path
+
+    @property
+    def log(self) -> Path:
+        return self.path / LOG_NAME
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.path / CHECKPOINT_NAME
+
+    def records(self) -> RunRecords | None:
+        """The log read back (every completed epoch, even mid-run), None without a log; RunLogError if unreadable."""
+        return read_records(self.log) if self.log.exists() else None
+
+    def state(self) -> str:
+        """``complete`` (its log says so), ``resumable`` (a checkpoint exists) or ``new``."""
+        try:
+            if (records := self.records()) is not None and records.complete:
+                return "complete"
+        except RunLogError:
+            pass
+        return "resumable" if self.checkpoint.exists() else "new"
+
+    def animation(self, epoch: int) -> Path:
+        """Where the animation of the policy after ``epoch`` lives."""
+        return self.path / POLICY_DIR / f"epoch_{epoch}.gif"
+
+    def animations(self) -> dict[int, Path]:
+        """The run's policy animations: epoch -> path, in epoch order (none: empty)."""
+        found = {}
+        for path in (self.path / POLICY_DIR).glob("epoch_*.gif"):
+            epoch = path.stem.removeprefix("epoch_")
+            if epoch.isdigit():
+                found[int(epoch)] = path
+        return dict(sorted(found.items()))
+
+    @contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold the run's lock for the ``with`` block; :class:`RunLockedError` if another process has it.
+        The holder writes its pid into the lock file (:meth:`holder`) and empties it on release."""
+        with open(self.path / LOCK_NAME, "a+") as lock_file:  # not "w": that would empty a holder's pid
+            try:
+                fcntl.flock(lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = self.holder()
+                raise RunLockedError(f"{self.path} is being run by another process"
+                                     + (f" (pid {holder})" if holder else "")) from None
+            lock_file.truncate(0)
+            lock_file.write(f"{os.getpid()}\n")
+            lock_file.flush()
+            try:
+                yield
+            finally:
+                lock_file.truncate(0)
+
+    def holder(self) -> int | None:
+        """The pid of the live process holding the run's lock, as it recorded it; None when none is
+        recorded (no lock, released, or taken by hersd before locks recorded pids) or that process is gone."""
+        try:
+            pid = int((self.path / LOCK_NAME).read_text().strip())
+        except (OSError, ValueError):
+            return None
+        try:
+            os.kill(pid, 0)  # signal 0: only asks whether the process exists
+        except ProcessLookupError:  # it died without releasing (kill -9): the lock is free
+            return None
+        except PermissionError:  # alive, another user's
+            pass
+        return pid
+
+
+def remove_if_unused(directory: Path, up_to: Path) -> None:
+    """Remove a run directory that holds nothing but its lock file (a run that failed at start),
+    then its parents while empty, up to (not including) ``up_to``."""
+    if not directory.is_dir() or {p.name for p in directory.iterdir()} - {LOCK_NAME}:
+        return
+    (directory / LOCK_NAME).unlink(missing_ok=True)
+    up_to = up_to.resolve()
+    while directory.resolve() != up_to and directory.resolve().is_relative_to(up_to) and not any(directory.iterdir()):
+        directory.rmdir()
+        directory = directory.parent
+
+
+def keep_aside(path: Path, why: str) -> Path:
+    """Rename ``run.mcap`` to ``run.<why>-<time>.mcap`` (any file likewise) next to it; returns the new path."""
+    kept = path.with_name(f"{path.name.split('.')[0]}.{why}-{time.strftime('%Y%m%d-%H%M%S')}{path.suffix}")
+    os.replace(path, kept)
+    return kept
+
+
+def check_writable(directory: Path) -> None:
+    """Fail early (ConfigError) if ``directory`` cannot be created or written."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        probe = directory / f".write-test-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        raise ConfigError(f"results_dir: cannot write to {directory} ({err.strerror}); "
+                          f"pass results_dir=<a writable folder>") from None

@@ -1,0 +1,94 @@
+"""Schedule kinds by name: the package's own (:data:`SCHEDULES`), those other packages declare in
+the entry point group ``hersd.schedules`` (``step = my_pkg.schedules:Step``), and any class by its
+import path (Hydra's ``_target_`` convention: ``schedule._target_=my_pkg.schedules.Step``)."""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+from typing import Any, Mapping
+
+from hersd.contract.errors import ConfigError
+from hersd.contract.schedules.base import Schedule, check_rates
+from hersd.contract.schedules.constant import Constant
+from hersd.contract.schedules.cosine import Cosine
+from hersd.contract.schedules.exponential import Exponential
+from hersd.contract.schedules.linear import Linear
+from hersd.contract.schedules.success import Success
+from hersd.contract.schedules.table import Table
+
+# The package's kinds, in the order of reports and tables.
+SCHEDULES: dict[str, type[Schedule]] = {cls.kind: cls for cls in (Constant, Linear, Exponential, Success, Cosine, Table)}
+DEFAULT = Constant  # the schedule of a config that names none (HER)
+ENTRY_POINT_GROUP = "hersd.schedules"
+TARGET_KEY = "_target_"
+
+
+def registered(kind: str) -> type[Schedule] | None:
+    """The class registered under ``kind`` (the package's or an entry point's), else None."""
+    if kind in SCHEDULES:
+        return SCHEDULES[kind]
+    found = entry_points(group=ENTRY_POINT_GROUP, name=kind)
+    return next(iter(found)).load() if found else None
+
+
+def known_kinds() -> list[str]:
+    """Every registered kind: the package's, then the entry points' (sorted)."""
+    return [*SCHEDULES, *sorted({point.name for point in entry_points(group=ENTRY_POINT_GROUP)} - set(SCHEDULES))]
+
+
+def schedule_class(kind: str) -> type[Schedule]:
+    """The class of a kind name or of an import path ``package.module.Class`` (ConfigError, one line, if none)."""
+    cls = registered(kind)
+    if cls is None and "." in kind:
+        module, _, name = kind.rpartition(".")
+        try:
+            cls = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError) as err:
+            raise ConfigError(f"schedule class {kind} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+    if cls is None:
+        raise ConfigError(f"schedule.kind={kind!r} is unknown; choose one of: {', '.join(known_kinds())}, "
+                          f"or a class: schedule.{TARGET_KEY}=<module>.<Class>")
+    if not (isinstance(cls, type) and issubclass(cls, Schedule)):
+        raise ConfigError(f"schedule {kind} is not a hersd.contract.schedules.Schedule subclass")
+    if cls.rate is Schedule.rate:
+        raise ConfigError(f"schedule {kind} defines no rate(self, k, total_epochs, train_success=()); "
+                          "a schedule needs it (tag and label have defaults)")
+    return cls
+
+
+def schedule_from_config(node: Mapping[str, Any], total_epochs: int) -> Schedule:
+    """A config's ``schedule`` mapping (``kind`` or ``_target_`` and the parameters) -> the resolved schedule of
+    a run of total_epochs (:func:`settle`); ConfigError (one line) for an unknown kind, a setting it lacks, a
+    value out of range or a rate outside [0, 1]."""
+    settings = dict(node)
+    target, kind = settings.pop(TARGET_KEY, None), settings.pop("kind", None)
+    cls = schedule_class(target or kind) if target or kind else DEFAULT
+    names = [item.name for item in cls.params()]
+    unknown = sorted(set(settings) - set(names))
+    if unknown:
+        raise ConfigError(f"schedule.{unknown[0]} is not a setting of schedule {target or kind or DEFAULT.kind}; "
+                          f"its settings: {', '.join(names) or 'none'}")
+    return settle(cls(**settings), total_epochs)
+
+
+def settle(schedule: Schedule, total_epochs: int) -> Schedule:
+    """The schedule a run of total_epochs uses: the kind it equals (:meth:`Schedule.equivalent`), resolved for
+    total_epochs, its rates checked in [0, 1] if it does not adapt (ScheduleRateError, one line)."""
+    schedule = schedule.equivalent()
+    schedule.resolve(total_epochs)
+    check_rates(schedule, total_epochs)
+    return schedule
+
+
+def schedule_from_record(record: Mapping[str, Any]) -> Schedule:
+    """The schedule a log's config holds (:meth:`Schedule.record`); settings the kind lacks (the flat
+    schema's) are ignored. ConfigError if its class cannot be found."""
+    cls = schedule_class(record["kind"])
+    names = {item.name for item in cls.params()}
+    return cls(**{name: value for name, value in record.items() if name in names})
+
+
+def schedule_rank(kind: str) -> int:
+    """Sort key of a kind: its place in SCHEDULES, other kinds after them."""
+    return list(SCHEDULES).index(kind) if kind in SCHEDULES else len(SCHEDULES)

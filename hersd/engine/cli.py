@@ -1,0 +1,150 @@
+"""``hersd-train``: compose one run's config from the command line, run it, print its log's path.
+
+``hersd-train task=push schedule=linear schedule.beta1=0.25 seed=0 epochs=50``; re-running
+the same command resumes an interrupted run. ``--help`` is generated from the schema
+(:mod:`hersd.contract.config`, each field's comment), the config groups under ``conf/`` and each schedule class
+(the registered kinds, and a class of your own the command names: ``schedule._target_=<module>.<Class> --help``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+from hersd.contract.compose import compose_train, explain_config_error, group_options
+from hersd.contract.config import PACKAGE_LEARNERS, ConfigError, TrainConfig
+from hersd.contract.schedules import TARGET_KEY, known_kinds, schedule_class
+from hersd.contract.runstore import RunLockedError, check_writable, run_dir
+
+GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
+_FIELD_LINE = re.compile(r"^\s+(\w+):[^=]+=.*?(?:#\s*(.*))?$")
+
+
+def field_docs(schema: type) -> dict[str, str]:
+    """Field name -> its documentation: the comment on the field's line, else the comment lines above it."""
+    docs: dict[str, str] = {}
+    above: list[str] = []
+    for line in inspect.getsource(schema).splitlines():
+        stripped = line.strip()
+        if stripped.startswith("#"):
+            above.append(stripped.lstrip("# "))
+            continue
+        match = _FIELD_LINE.match(line)
+        if match:
+            docs[match.group(1)] = match.group(2) or " ".join(above)
+        above = []
+    return docs
+
+
+def schema_lines(schema: type, prefix: str = "") -> list[str]:
+    """``key=default  doc`` for every field of a dataclass schema, nested ones flattened with dots."""
+    docs = field_docs(schema)
+    lines = []
+    defaults = schema()
+    for item in dataclasses.fields(schema):
+        value: Any = getattr(defaults, item.name)
+        if item.name == "schedule":
+            lines.append(f"  {prefix}schedule.kind={value.kind}".ljust(34) + "  the schedule (below), or "
+                         f"schedule.{TARGET_KEY}=<module>.<Class>: a hersd.contract.schedules.Schedule of your own")
+        elif item.name == "learner":  # its name, then each package learner's settings (docs/LEARNERS.md)
+            lines.append(f"  {prefix}learner.name={value.name}".ljust(34) + f"  {docs.get(item.name, '')}")
+            for name, settings in PACKAGE_LEARNERS.items():
+                lines += schema_lines(settings, f"{prefix}learner.{name}.") if settings else []
+        elif dataclasses.is_dataclass(value):
+            lines += schema_lines(type(value), f"{prefix}{item.name}.")
+        else:
+            shown = "null" if value is None else str(value).lower() if isinstance(value, bool) else value
+            lines.append(f"  {prefix}{item.name}={shown}".ljust(34) + f"  {docs.get(item.name, '')}")
+    return lines
+
+
+def schedule_lines(chosen: list[str] = ()) -> list[str]:
+    """Each schedule kind's formula, then its settings (``schedule.<name>=default  doc``), as its class declares
+    them; after the registered kinds, the classes ``chosen`` by path (``schedule._target_=<module>.<Class>``)."""
+    lines = []
+    for kind in [*known_kinds(), *(path for path in chosen if path not in known_kinds())]:
+        cls = schedule_class(kind)
+        lines.append(f"  {kind}: {cls.formula or cls.__doc__.splitlines()[0]}")
+        for item in cls.params():
+            shown = "null" if item.default is None else item.default
+            lines.append(f"    schedule.{item.name}={shown}".ljust(34) + f"  {item.metadata['doc']}")
+    return lines
+
+
+def chosen_schedules(argv: list[str]) -> list[str]:
+    """The schedule classes a command line names by ``schedule._target_=`` or ``schedule.kind=``."""
+    keys = (f"schedule.{TARGET_KEY}", "schedule.kind")
+    return [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
+
+
+def usage(argv: list[str] = ()) -> str:
+    """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
+    with the package's kinds (ConfigError if it cannot be imported)."""
+    groups = [f"  {group}={'|'.join(group_options(group))}" for group in GROUPS]
+    return "\n".join([
+        "usage: hersd-train [KEY=VALUE ...]", "",
+        "Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same",
+        "command resumes an interrupted run from its last checkpoint. Defaults are the seed paper's",
+        "appendix settings. See docs/ARCHITECTURE.md.", "",
+        "config groups (conf/<group>/*.yaml):", *groups, "",
+        "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
+        *schema_lines(TrainConfig), "",
+        "schedules (eps(k): the relabel rate of epoch k = 1..K; schedule=<kind> or schedule.kind=<kind>, then its settings):",
+        *schedule_lines(chosen_schedules(argv)),
+    ])
+
+
+def _fail(message: str, code: int = 2) -> None:
+    print(f"hersd-train: error: {message}", file=sys.stderr)
+    sys.exit(code)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
+    losses turn NaN or infinite with one line and exit code 1, an interrupt (Ctrl-C) with one line
+    and exit code 130."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    argv = sys.argv[1:] if argv is None else argv
+    if any(arg in ("-h", "--help") for arg in argv):
+        try:
+            print(usage(argv))
+        except ConfigError as err:
+            _fail(str(err))
+        return
+    try:
+        cfg = compose_train(argv)
+        check_writable(run_dir(cfg).parent if cfg.run_dir is not None else Path(cfg.results_dir))
+    except ConfigError as err:
+        _fail(str(err))
+    except (HydraException, OmegaConfBaseException) as err:
+        _fail(explain_config_error(err))
+    from hersd.engine.resources import resolve_device  # torch and MuJoCo load only once the input is valid
+    from hersd.engine.train import NonFiniteLossError, RunStateError, train
+
+    try:
+        resolve_device(cfg.device)
+        log_path = train(cfg, command=" ".join(["hersd-train", *argv]))
+    except ConfigError as err:
+        _fail(str(err))
+    except RunLockedError as err:
+        _fail(f"{err}; wait for it to finish")
+    except RunStateError as err:
+        _fail(str(err))
+    except NonFiniteLossError as err:
+        _fail(str(err), code=1)
+    except KeyboardInterrupt:
+        print(f"hersd-train: interrupted; the finished epochs are kept in {run_dir(cfg)}: re-run the same "
+              "command to resume", file=sys.stderr)
+        sys.exit(130)
+    print(log_path)
+
+
+if __name__ == "__main__":
+    main()
+

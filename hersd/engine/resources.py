@@ -1,0 +1,54 @@
+"""What a run reads of the machine with torch: the device (``device=auto`` is CUDA when torch sees a GPU,
+else the CPU), the memory it may still take, and the machine description every log records. The thread count
+is :mod:`hersd.contract.cores`'s.
+"""
+
+from __future__ import annotations
+
+import platform
+from pathlib import Path
+from typing import Any
+
+from hersd.contract.cores import available_cores
+
+
+def available_memory_bytes() -> int | None:
+    """Memory this machine can still give (Linux ``MemAvailable``); None where unknown."""
+    meminfo = Path("/proc/meminfo")
+    if not meminfo.exists():
+        return None
+    for line in meminfo.read_text().splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) * 1024
+    return None
+
+
+def resolve_device(device: str) -> Any:
+    """``auto`` -> cuda if available else cpu; ``cuda[:N]`` must be available (else ConfigError)."""
+    import torch
+
+    from hersd.contract.config import ConfigError
+
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device={device}: torch sees no CUDA device here; use device=cpu or device=auto")
+    if device.startswith("cuda:") and int(device[5:]) >= torch.cuda.device_count():
+        raise ConfigError(f"device={device}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+    return torch.device(device)
+
+
+def machine_info() -> dict[str, Any]:
+    """The CPU (model, cores) and the instruction set torch's kernels use: bitwise results hold
+    on one machine, not across CPU types, so two logs that differ can be told apart by this."""
+    import torch
+
+    model = platform.processor() or platform.machine()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        names = [line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines()
+                 if line.startswith("model name")]
+        model = names[0] if names else model
+    return {"cpu_model": model, "cpu_cores": available_cores(), "machine": platform.machine(),
+            "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "cuda_device": torch.cuda.get_device_name() if torch.cuda.is_available() else None}
