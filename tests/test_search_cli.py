@@ -12,6 +12,7 @@ from searches import FINISHED, load, run_meta, tiny_search
 
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import read_run
+from hersd.contract.study import default_storage
 from sweeps.search import cli
 
 CLI = "sweeps.search.cli:main"
@@ -59,3 +60,12 @@ def test_ci_search_on_two_workers_with_a_journal(tmp_path: Path, capsys) -> None
     report = subprocess.run(shlex.split(command), capture_output=True, text=True, timeout=300)
     assert report.returncode == 0, report.stdout[-2000:] + report.stderr[-2000:]
     assert (tmp_path / "report" / "search" / f"{study.study_name}_beta_plane.png").stat().st_size > 0
+
+
+def test_the_report_command_names_only_the_storages_the_report_would_not_find(tmp_path: Path) -> None:
+    assert cli.report_command(tmp_path, default_storage(tmp_path, "s")) == shlex.join(["hersd-report", str(tmp_path)])
+    assert cli.report_command(tmp_path, f"journal:{tmp_path}/search/s.log") == shlex.join(["hersd-report", str(tmp_path)])
+    elsewhere = f"journal:{tmp_path}/shared/s.log"
+    assert cli.report_command(tmp_path, elsewhere) == shlex.join(["hersd-report", str(tmp_path), "--storage", elsewhere])
+    assert shlex.split(cli.report_command(tmp_path, "postgresql://u:secret@host/db"))[2:] == [
+        "--storage", "postgresql://u:***@host/db"]

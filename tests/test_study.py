@@ -1,16 +1,15 @@
 """hersd/contract/study.py, the study's contract: storage specs and their names, the trial parameters'
-encoding, the report command. (Opening storages: tests/test_search_storage.py for writing,
+encoding, the storages the report finds by itself. (Opening storages: tests/test_search_storage.py for writing,
 tests/test_studies.py read-only.)"""
 
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 
 import pytest
 
-from hersd.contract.study import (StudySettings, default_storage, report_command, storage_file, storage_location, storage_name,
-                         stored_params, trial_params)
+from hersd.contract.study import (StudySettings, default_storage, found_by_report, storage_file, storage_location,
+                                  storage_name, stored_params, trial_params)
 
 
 def test_storage_specs_name_a_journal_a_sqlite_file_or_a_database(tmp_path: Path) -> None:
@@ -22,13 +21,12 @@ def test_storage_specs_name_a_journal_a_sqlite_file_or_a_database(tmp_path: Path
     assert storage_name("postgresql://u:secret@host/db") == "postgresql://u:***@host/db"
 
 
-def test_the_report_command_names_only_the_storages_the_report_would_not_find(tmp_path: Path) -> None:
-    assert report_command(tmp_path, default_storage(tmp_path, "s")) == shlex.join(["hersd-report", str(tmp_path)])
-    assert report_command(tmp_path, f"journal:{tmp_path}/search/s.log") == shlex.join(["hersd-report", str(tmp_path)])
-    elsewhere = f"journal:{tmp_path}/shared/s.log"
-    assert report_command(tmp_path, elsewhere) == shlex.join(["hersd-report", str(tmp_path), "--storage", elsewhere])
-    assert shlex.split(report_command(tmp_path, "postgresql://u:secret@host/db"))[2:] == [
-        "--storage", "postgresql://u:***@host/db"]
+def test_the_report_finds_by_itself_only_the_storages_in_its_folders_search_folder(tmp_path: Path) -> None:
+    assert found_by_report(tmp_path, default_storage(tmp_path, "s"))
+    assert found_by_report(tmp_path, f"journal:{tmp_path}/search/s.log")
+    assert not found_by_report(tmp_path, f"journal:{tmp_path}/shared/s.log")
+    assert not found_by_report(tmp_path, f"{tmp_path}/search/s.txt")
+    assert not found_by_report(tmp_path, "postgresql://u:secret@host/db")
 
 
 @pytest.mark.parametrize("params, kinds", [

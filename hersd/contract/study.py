@@ -18,7 +18,6 @@ Light: imports neither Optuna nor SQLAlchemy (tests/test_layers.py), so both lay
 from __future__ import annotations
 
 import importlib.util
-import shlex
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -109,15 +108,11 @@ def find_study_storages(folder: str | Path) -> list[Path]:
     return sorted(path for path in search.iterdir() if path.is_file() and path.suffix in STORAGE_SUFFIXES)
 
 
-def report_command(results_dir: str | Path, spec: str) -> str:
-    """The ``hersd-report`` command that draws the runs of ``results_dir`` and the studies of storage ``spec``
-    (``--storage`` only when the report would not find the storage itself)."""
-    results = Path(results_dir).resolve()
-    command = ["hersd-report", str(results)]
+def found_by_report(results_dir: str | Path, spec: str) -> bool:
+    """Whether ``hersd-report results_dir`` finds storage ``spec`` by itself (:func:`find_study_storages`)."""
     path = storage_file(spec)
-    if path is None or path.parent != results / SEARCH_FOLDER or path.suffix not in STORAGE_SUFFIXES:
-        command += ["--storage", shown(spec)]  # a password shows as ***: libpq also reads PGPASSWORD
-    return shlex.join(command)
+    return path is not None and path.parent == Path(results_dir).resolve() / SEARCH_FOLDER \
+        and path.suffix in STORAGE_SUFFIXES
 
 
 # --------------------------------------------------------------------------- databases (both ways: SQLAlchemy URL objects given)

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import shlex
 import sys
+from pathlib import Path
 from typing import NoReturn
 
 import optuna
 from optuna.storages import BaseStorage
 
 from hersd.contract.config import ConfigError
-from hersd.contract.study import report_command, shown, storage_file
+from hersd.contract.study import found_by_report, shown, storage_file
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
@@ -100,6 +101,15 @@ def launch(plan: SearchPlan, storage: BaseStorage, study: optuna.Study) -> list[
               f"resume a search cut short)")
         return None
     return run_local(plan, shares)
+
+
+def report_command(results_dir: str, spec: str) -> str:
+    """The ``hersd-report`` command that draws the runs of ``results_dir`` and the studies of storage ``spec``
+    (``--storage`` only when the report would not find the storage itself)."""
+    command = ["hersd-report", str(Path(results_dir).resolve())]
+    if not found_by_report(results_dir, spec):
+        command += ["--storage", shown(spec)]  # a password shows as ***: libpq also reads PGPASSWORD
+    return shlex.join(command)
 
 
 def summarise(plan: SearchPlan, storage: BaseStorage, first_trial: int) -> str | None:
