@@ -1,6 +1,8 @@
-"""The tree's layers import one way: hersd (one run) <- sweeps (many runs); hersd <- analysis
-(logs to figures). No module imports a layer above it, runs one (``python -m``, a subprocess,
-``importlib``: any string naming its modules), and no import chain is circular."""
+"""The tree's layers, by folder, import one way: hersd/contract (what the others share) <- hersd/engine (one run)
+<- sweeps (many runs); hersd/contract <- analysis (logs to figures); sweeps and analysis never meet. Every import
+counts: at module level, inside a function, under ``if TYPE_CHECKING:``, relative ones. No module imports a layer
+it may not, or a module by its path from before the split (hersd/__init__.py's MOVED: those are for users), runs
+one (``python -m``, a subprocess, ``importlib``: any string naming its modules), and no import chain is circular."""
 
 from __future__ import annotations
 
@@ -12,52 +14,103 @@ from pathlib import Path
 
 import pytest
 
+from hersd import moved_to
+
 ROOT = Path(__file__).resolve().parent.parent
-LAYERS = {"hersd": 0, "sweeps": 1, "hydra_plugins": 1, "analysis": 1}  # analysis and sweeps never meet
-MAY_IMPORT = {"hersd": {"hersd"}, "sweeps": {"hersd", "sweeps"}, "hydra_plugins": {"hersd", "sweeps"},
-              "analysis": {"hersd", "analysis"}}
+FOLDERS = ("hersd", "conf", "sweeps", "hydra_plugins", "analysis", "scripts", "benchmarks")  # every layer's files
+PACKAGES = ("hersd", "sweeps", "hydra_plugins", "analysis")  # the installed code: docs/ARCHITECTURE.md names it all
+# Layer -> the layers it may import. "hersd" is the package's face (its version and the old paths' table);
+# "conf" the YAML configs' package, hersd.conf.
+MAY_IMPORT = {
+    "hersd": set(),
+    "conf": set(),
+    "contract": {"hersd", "conf", "contract"},
+    "engine": {"hersd", "conf", "contract", "engine"},
+    "sweeps": {"hersd", "conf", "contract", "engine", "sweeps"},
+    "hydra_plugins": {"hersd", "conf", "contract", "engine", "sweeps", "hydra_plugins"},
+    "analysis": {"hersd", "conf", "contract", "analysis"},
+    "scripts": {"hersd", "conf", "contract", "scripts"},  # an operator's chores on the logs
+    "benchmarks": {"hersd", "conf", "contract", "engine", "sweeps", "analysis", "benchmarks"},
+}
+MAY_NAME = {**MAY_IMPORT, "hersd": {"contract", "engine"}}  # the face's table names the modules it imports by name
+ENTRY_POINT_GROUPS = {"hersd.schedules", "hersd.learners"}  # names of entry point groups, not of modules
+HEAVY = ("torch", "mujoco", "gymnasium", "gymnasium_robotics")
+
+
+def layer(module: str) -> str | None:
+    """The layer of a project module by its folder (``hersd.contract.config`` -> contract), None for any other name."""
+    parts = module.split(".")
+    if parts[0] == "hersd":
+        return "hersd" if len(parts) == 1 else parts[1] if parts[1] in ("contract", "engine", "conf") else None
+    return parts[0] if parts[0] in FOLDERS else None
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(("hersd",) + parts if parts[0] == "conf" else parts).removesuffix(".__init__")
+
+
+def files(folders=FOLDERS) -> list[Path]:
+    return sorted(path for folder in folders for path in (ROOT / folder).rglob("*.py"))
+
+
+def imported(path: Path, node: ast.AST) -> list[str]:
+    """The modules one import statement of ``path`` names (``from m import n``: m and m.n), relative ones made absolute."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    if not isinstance(node, ast.ImportFrom):
+        return []
+    module = module_name(path)
+    package = (module if path.name == "__init__.py" else module.rpartition(".")[0]).split(".")
+    base = node.module if not node.level else ".".join(
+        package[:len(package) - node.level + 1] + ([node.module] if node.module else []))
+    return [base] + [f"{base}.{alias.name}" for alias in node.names]
+
+
+def imports(path: Path) -> list[tuple[int, str]]:
+    """(line, module) of every import anywhere in the file: module level, functions, TYPE_CHECKING blocks."""
+    return [(node.lineno, name) for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+            for name in imported(path, node)]
 
 
 def project_imports() -> dict[str, set[str]]:
-    """Module name -> the project modules it imports anywhere in its file (lazy imports included)."""
-    graph: dict[str, set[str]] = {}
-    for package in LAYERS:
-        for path in (ROOT / package).rglob("*.py"):
-            module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-            targets = set()
-            for node in ast.walk(ast.parse(path.read_text())):
-                names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
-                    [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else []
-                targets |= {name for name in names if name.split(".")[0] in LAYERS}
-            graph[module] = targets
-    return graph
+    """Module name -> the project modules it imports anywhere in its file."""
+    return {module_name(path): {name for _, name in imports(path) if layer(name)} for path in files()}
 
 
-def test_no_module_imports_a_layer_it_may_not():
-    wrong = [f"{module} imports {target}" for module, targets in project_imports().items() for target in targets
-             if target.split(".")[0] not in MAY_IMPORT[module.split(".")[0]]]
+def test_no_module_imports_a_layer_it_may_not_or_an_old_path():
+    wrong = []
+    for path in files():
+        own = layer(module_name(path))
+        for line, name in imports(path):
+            where = f"{path.relative_to(ROOT)}:{line} imports {name}"
+            if moved_to(name):
+                wrong.append(f"{where}, a path from before the split: import {moved_to(name)}")
+            elif layer(name) and layer(name) not in MAY_IMPORT[own]:
+                wrong.append(where)
     assert not wrong, wrong
 
 
-def named_layers(text: str) -> set[str]:
-    """The layers a string names as modules: ``"analysis.report"``, ``"analysis.report:main"``, ``"-m analysis"``."""
-    whole = re.fullmatch(r"(\w+)(\.\w+)*(:\w+)?", text)
-    run = re.findall(r"-m\s+(\w+)", text)
-    return ({whole.group(1)} if whole else set()) | set(run)
+def named_modules(text: str) -> set[str]:
+    """The modules a string names: ``"analysis.report"``, ``"analysis.report:main"``, ``"-m analysis"``."""
+    whole = re.fullmatch(r"(\w+(?:\.\w+)*)(:\w+)?", text)
+    return ({whole.group(1)} if whole else set()) | set(re.findall(r"-m\s+([\w.]+)", text))
 
 
 def test_no_module_runs_a_layer_it_may_not_import():
     """A module may not reach another layer around the imports, e.g. ``[sys.executable, "-m", "analysis.x"]``."""
     wrong = []
-    for package in LAYERS:
-        for path in (ROOT / package).rglob("*.py"):
-            tree = ast.parse(path.read_text())
-            docstrings = {id(node.body[0].value) for node in ast.walk(tree)
-                          if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
-                          and node.body and isinstance(node.body[0], ast.Expr)}
-            for node in ast.walk(tree):
-                if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-                    if named_layers(node.value) & set(LAYERS) - MAY_IMPORT[package] - {package}:
+    for path in files():
+        own = layer(module_name(path))
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                      if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                      and node.body and isinstance(node.body[0], ast.Expr)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+                for name in named_modules(node.value) - ENTRY_POINT_GROUPS:
+                    target = layer(moved_to(name) or name)
+                    if (moved_to(name) and own != "hersd") or target not in MAY_NAME[own] | {own, "hersd", None}:
                         wrong.append(f"{path.relative_to(ROOT)}:{node.lineno} names {node.value!r}")
     assert not wrong, wrong
 
@@ -66,7 +119,7 @@ def test_no_import_circle():
     graph = project_imports()
     modules = set(graph)
 
-    def resolve(target: str) -> str | None:  # "hersd.config.X" -> the module "hersd.config"
+    def resolve(target: str) -> str | None:  # "hersd.contract.config.X" -> the module "hersd.contract.config"
         while target and target not in modules:
             target = target.rpartition(".")[0]
         return target or None
@@ -88,24 +141,21 @@ def test_no_import_circle():
             visit(module, [])
 
 
-def test_the_core_imports_neither_optuna_nor_sqlalchemy():
-    """hersd/ is one run: opening a study storage lives with its users (sweeps.search.storage for
-    writing, analysis.studies read-only); the trial encoding they share (hersd/study.py) needs neither."""
-    wrong = []
-    for path in (ROOT / "hersd").rglob("*.py"):
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
-                [node.module] if isinstance(node, ast.ImportFrom) and node.module else []
-            wrong += [f"{path.relative_to(ROOT)} imports {name}" for name in names
-                      if name.split(".")[0] in ("optuna", "sqlalchemy")]
+def test_the_contract_imports_neither_torch_nor_mujoco_nor_a_study_storage():
+    """hersd/contract loads neither torch nor MuJoCo (analysis neither); no part of hersd imports Optuna or
+    SQLAlchemy: opening a study storage lives with its users (sweeps.search.storage for writing,
+    analysis.studies read-only); the trial encoding they share (hersd/contract/study.py) needs neither."""
+    banned = {"contract": HEAVY + ("optuna", "sqlalchemy"), "engine": ("optuna", "sqlalchemy"), "analysis": HEAVY}
+    wrong = [f"{path.relative_to(ROOT)}:{line} imports {name}" for path in files(("hersd", "analysis"))
+             for line, name in imports(path) if name.split(".")[0] in banned.get(layer(module_name(path)), ())]
     assert not wrong, wrong
 
 
-def test_light_modules_import_without_torch_or_mujoco():
-    light = ["analysis", "analysis.report", "hersd.compose", "hersd.runstore", "hersd.runlog", "hersd.study",
-             "hersd.config", "hersd.schedules", "hersd.envs.tasks", "hersd.resources", "sweeps.launch"]
+def test_the_contract_analysis_and_the_sweep_planner_load_neither_torch_nor_mujoco():
+    light = ["analysis", "sweeps.plan", "sweeps.launch", "sweeps.status"] + [
+        module_name(path) for path in files(("hersd/contract", "analysis"))]
     code = (f"import sys; import {', '.join(light)}; "
-            "heavy = [m for m in ('torch', 'mujoco', 'gymnasium_robotics') if m in sys.modules]; print(heavy)")
+            f"heavy = [m for m in {HEAVY!r} if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
@@ -113,23 +163,22 @@ def test_light_modules_import_without_torch_or_mujoco():
 def test_no_function_is_longer_than_60_lines_without_a_reason():
     """A longer function must say why on its ``def`` line (a comment containing 'long:')."""
     too_long = []
-    for package in LAYERS:
-        for path in (ROOT / package).rglob("*.py"):
-            lines = path.read_text().splitlines()
-            for node in ast.walk(ast.parse("\n".join(lines))):
-                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                    length = node.end_lineno - node.lineno + 1
-                    if length > 60 and "long:" not in lines[node.lineno - 1]:
-                        too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({length} lines)")
+    for path in files():
+        lines = path.read_text().splitlines()
+        for node in ast.walk(ast.parse("\n".join(lines))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = node.end_lineno - node.lineno + 1
+                if length > 60 and "long:" not in lines[node.lineno - 1]:
+                    too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({length} lines)")
     assert not too_long, too_long
 
 
 def test_the_architecture_doc_names_every_module_and_only_modules_that_exist():
-    """docs/ARCHITECTURE.md matches the tree: every module of a layer is named there (as `name.py`),
-    and every `*.py` it names exists (a path as given, a bare name somewhere in the layers)."""
+    """docs/ARCHITECTURE.md matches the tree: every module of the packages is named there (as `name.py`),
+    and every `*.py` it names exists (a path as given, a bare name somewhere in the packages)."""
     doc = (ROOT / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
     named = set(re.findall(r"`([\w/]+\.py)`", doc))
-    modules = [path for package in LAYERS for path in (ROOT / package).rglob("*.py") if path.name != "__init__.py"]
+    modules = [path for path in files(PACKAGES) if path.name != "__init__.py"]
     unnamed = [str(path.relative_to(ROOT)) for path in modules if path.name not in {Path(n).name for n in named}]
     assert not unnamed, f"modules missing from docs/ARCHITECTURE.md: {unnamed}"
     names = {path.name for path in modules}
