@@ -1,6 +1,6 @@
-"""What a run reads of the machine with torch: the device (``device=auto`` is CUDA when torch sees a GPU,
-else the CPU), the memory it may still take, and the machine description every log records. The thread count
-is :mod:`hersd.contract.cores`'s.
+"""What a run reads of the machine besides its thread count (:mod:`hersd.contract.cores`): the torch device
+(``device=auto`` is CUDA when torch sees a GPU, else the CPU), the memory it may still take, and the machine
+description every log records. torch is imported only by the functions that need it.
 """
 
 from __future__ import annotations
