@@ -485,13 +485,14 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
 
     start = time.perf_counter()
     paths, drawing = _start_drawing(figures + study_figures, folders, fmt)
-    analysis = with_statistics(analysis)  # while the workers draw
-    timings["statistics"] = time.perf_counter() - start
-    tables, critic_tests, claims = _report_tables(table, analysis)
-    written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
-    written += _write_studies(studies, out / "search")
-    timings["tables"] = time.perf_counter() - start - timings["statistics"]
-    images = drawing.results()
+    with drawing:  # an error below stops the workers
+        analysis = with_statistics(analysis)  # while the workers draw
+        timings["statistics"] = time.perf_counter() - start
+        tables, critic_tests, claims = _report_tables(table, analysis)
+        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
+        written += _write_studies(studies, out / "search")
+        timings["tables"] = time.perf_counter() - start - timings["statistics"]
+        images = drawing.results()
     timings["figures"] = time.perf_counter() - start
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 
