@@ -197,3 +197,14 @@ def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp
     assert line.startswith("warning: schedule class users_own_steps.Step cannot be imported")
     assert "2 run logs skipped (step0/run.mcap and others)" in line and "on PYTHONPATH" in line
     assert "lacks or mistypes" not in line
+
+
+def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_path):
+    """precision=bf16 runs of HER beside fp32 ones: ``HER`` stays the fp32 runs' label (analysis/claims.py
+    looks it up), the others are ``HER precision=bf16``; no seed of one is pooled with the other."""
+    write_run(tmp_path / "fp32", make_config(epochs=load.PAPER_EPOCHS), np.zeros(3), complete=False)
+    bf16 = make_config(seed=1, epochs=load.PAPER_EPOCHS)
+    bf16.precision = "bf16"
+    write_run(tmp_path / "bf16", bf16, np.zeros(3), complete=False)
+    runs = load_runs(tmp_path).runs.set_index("path")
+    assert runs["config"].astype(str).to_dict() == {"fp32/run.mcap": "HER", "bf16/run.mcap": "HER precision=bf16"}
