@@ -106,8 +106,8 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
                  epochs: int = PAPER_EPOCHS, variants: Sequence[str] = ()) -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
-    than the paper's DDPG lead the label), ``HER precision=bf16`` (``variants``: :func:`variant`),
-    ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
+    than the paper's DDPG lead the label: :func:`learner_label`), ``HER precision=bf16``
+    (``variants``: :func:`variant`), ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
 
     Constant-rate schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
     appended when eps != HER_EPS; others are named by their label (:meth:`Schedule.label`); other
@@ -128,8 +128,14 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
     qualifiers += variants
     if epochs != PAPER_EPOCHS:
         qualifiers.append(f"K={epochs}")
-    prefix = [] if learner == "ddpg" else [learner.upper()]
+    prefix = [] if learner == "ddpg" else [learner_label(learner)]
     return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
+
+
+def learner_label(learner: str) -> str:
+    """A learner's name in labels: a registered name in capitals (``TD3``, ``SAC``); a class recorded by its
+    import path (no ``NAME`` of its own) by its class name as written (``user_late.TD3Late`` -> ``TD3Late``)."""
+    return learner.rpartition(".")[2] if "." in learner else learner.upper()
 
 
 def _config_order(run: dict[str, Any]) -> tuple:

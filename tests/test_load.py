@@ -40,6 +40,10 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
     ((ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
     ((ScheduleConfig("linear", beta1=0.5), 1.0, 1.0, True), "linear b1=0.5-MEP"),
     ((ScheduleConfig("cosine", start=1.0, end=0.5), 1.0, 1.0, False), "cosine 1→0.5"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "td3"), "TD3 HER"),
+    # a learner class without a NAME of its own is recorded by its path and labelled by its class name
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "user_late.TD3Late"), "TD3Late HER"),
+    ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False, "my_pkg.learners.Late", 4), "Late linear b1=0.25 K=4"),
 ])
 def test_config_labels(settings, label):
     assert config_label(*settings) == label
