@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, NamedTuple
+from typing import Any, Iterable, NamedTuple, Sequence
 
 import numpy as np
 import pandas as pd
@@ -95,11 +95,19 @@ class MissingSchedule(NamedTuple):
     error: str
 
 
+def variant(settings: dict[str, Any]) -> list[str]:
+    """A run's top-level settings that came after the first runs (HASHED_UNLESS) where not at their earlier
+    value, as ``key=value``, e.g. ``["precision=bf16"]``; ``settings`` as :func:`configuration` gives them."""
+    return [f"{key}={settings[key]}" for key, earlier in HASHED_UNLESS.items()
+            if "." not in key and settings.get(key, earlier) != earlier]
+
+
 def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg",
-                 epochs: int = PAPER_EPOCHS) -> str:
+                 epochs: int = PAPER_EPOCHS, variants: Sequence[str] = ()) -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
-    than the paper's DDPG lead the label), ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
+    than the paper's DDPG lead the label: :func:`learner_label`), ``HER precision=bf16``
+    (``variants``: :func:`variant`), ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
 
     Constant-rate schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
     appended when eps != HER_EPS; others are named by their label (:meth:`Schedule.label`); other
@@ -117,10 +125,17 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
         qualifiers.append(f"λr={lambda_r:g}")
     if lambda_h != HER_WEIGHTS[1]:
         qualifiers.append(f"λh={lambda_h:g}")
+    qualifiers += variants
     if epochs != PAPER_EPOCHS:
         qualifiers.append(f"K={epochs}")
-    prefix = [] if learner == "ddpg" else [learner.upper()]
+    prefix = [] if learner == "ddpg" else [learner_label(learner)]
     return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
+
+
+def learner_label(learner: str) -> str:
+    """A learner's name in labels: a registered name in capitals (``TD3``, ``SAC``); a class recorded by its
+    import path (no ``NAME`` of its own) by its class name as written (``user_late.TD3Late`` -> ``TD3Late``)."""
+    return learner.rpartition(".")[2] if "." in learner else learner.upper()
 
 
 def _config_order(run: dict[str, Any]) -> tuple:
@@ -320,16 +335,19 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     """The runs and epochs tables of readable logs: labels told apart, configs ordered."""
     rows = [dict(log.row) for log in logs]
     schedules = [schedule_from_record(json.loads(row["schedule_record"])) for row in rows]
+    variants = [variant(log.settings) for log in logs]
 
-    def label(row: dict[str, Any], schedule: Schedule, epochs: int = PAPER_EPOCHS) -> str:
-        return config_label(schedule, row["lambda_r"], row["lambda_h"], row["mep"], row["learner"], epochs)
+    def label(index: int, epochs: int = PAPER_EPOCHS) -> str:
+        row = rows[index]
+        return config_label(schedules[index], row["lambda_r"], row["lambda_h"], row["mep"], row["learner"], epochs,
+                            variants[index])
 
-    labels = [label(row, schedule) for row, schedule in zip(rows, schedules)]
+    labels = [label(index) for index in range(len(rows))]
     epochs_of: dict[str, set[int]] = {}
     for row, name in zip(rows, labels):
         epochs_of.setdefault(name, set()).add(row["total_epochs"])
-    labels = [label(row, schedule, row["total_epochs"]) if len(epochs_of[name]) > 1 else name
-              for row, schedule, name in zip(rows, schedules, labels)]
+    labels = [label(index, row["total_epochs"]) if len(epochs_of[name]) > 1 else name
+              for index, (row, name) in enumerate(zip(rows, labels))]
     # Within a task, seeds of one label must share every setting; where they do not, say what
     # differs. Across tasks a label (K included) may differ in budget per epoch (cycles): tasks are strata.
     groups = [(row["task"], label) for row, label in zip(rows, labels)]

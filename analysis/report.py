@@ -274,7 +274,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     if studies.read:
         parts.append("<h2>Optuna searches</h2>")
         for (stem, study), image in zip(studies.read.items(), study_images):
-            parts += [f"<figure><h3>{html.escape(stem)}: trials in the (β1, β2) plane</h3>{image}</figure>",
+            parts += [f"<figure><h3>{html.escape(stem)}: {html.escape(study.figure_title)}</h3>{image}</figure>",
                       f"<h3>Best trials: {html.escape(stem)}</h3><p>{html.escape(study.value_label)}</p>",
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
@@ -385,8 +385,8 @@ def _copy_animations(analysis: Analysis, folder: Path, figures: Path) -> dict[st
 def _study_figures(studies: Studies) -> list[ReportFigure]:
     from analysis.figures import ReportFigure
 
-    return [ReportFigure(f"{stem}_beta_plane", f"{stem}: trials in the (β1, β2) plane", study.value_label,
-                         study.beta_plane) for stem, study in studies.read.items()]
+    return [ReportFigure(f"{stem}_{study.figure_name}", f"{stem}: {study.figure_title}", study.value_label,
+                         study.figure) for stem, study in studies.read.items()]
 
 
 def _load(folder: Path, tasks, algos, timings: dict[str, float]) -> RunTable:
@@ -485,13 +485,14 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
 
     start = time.perf_counter()
     paths, drawing = _start_drawing(figures + study_figures, folders, fmt)
-    analysis = with_statistics(analysis)  # while the workers draw
-    timings["statistics"] = time.perf_counter() - start
-    tables, critic_tests, claims = _report_tables(table, analysis)
-    written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
-    written += _write_studies(studies, out / "search")
-    timings["tables"] = time.perf_counter() - start - timings["statistics"]
-    images = drawing.results()
+    with drawing:  # an error below stops the workers
+        analysis = with_statistics(analysis)  # while the workers draw
+        timings["statistics"] = time.perf_counter() - start
+        tables, critic_tests, claims = _report_tables(table, analysis)
+        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
+        written += _write_studies(studies, out / "search")
+        timings["tables"] = time.perf_counter() - start - timings["statistics"]
+        images = drawing.results()
     timings["figures"] = time.perf_counter() - start
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 

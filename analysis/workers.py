@@ -40,7 +40,6 @@ class ForkedMap:
             self._pending = self._pool.map_async(_run_job, range(len(items)), chunksize=1)
 
     def results(self) -> list[Any]:
-        global _JOBS
         if self._pool is None:
             return [self._function(item) for item in self._items]
         try:
@@ -48,7 +47,22 @@ class ForkedMap:
             self._pool.close()  # every job is done: let the workers exit
             return results
         finally:
-            self._pool.terminate()  # after close(), only reaps; after an error, stops the other jobs
-            self._pool.join()
-            gc.unfreeze()
-            _JOBS = None
+            self.close()
+
+    def close(self) -> None:
+        """Stop the workers still running and unfreeze the parent's objects (after :meth:`results`, or after an
+        error in the parent while they worked); with a ``with`` block, on its way out."""
+        global _JOBS
+        if self._pool is None:
+            return
+        self._pool.terminate()  # after pool.close(), only reaps; otherwise stops the jobs left
+        self._pool.join()
+        self._pool = None
+        gc.unfreeze()
+        _JOBS = None
+
+    def __enter__(self) -> ForkedMap:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()

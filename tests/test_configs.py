@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from hersd.contract.compose import compose, compose_train, group_options
+from hersd.contract.compose import compose, compose_train, group_options, mean_rate
 from hersd.contract.config import TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_run
 from hersd.contract.runstore import config_hash
 from hersd.contract.schedules import schedule_from_record
@@ -255,3 +256,13 @@ def test_the_restatement_check_finds_defaults_at_any_depth_and_kind():
         assert restated_keys(stated, schedule_defaults(stated, "schedule/x.yaml")) == restated
     assert schedule_defaults({"defaults": ["exponential"]}, "schedule/x.yaml")["beta2"] == 0.0  # the parent's kind
     assert key_lines("a:\n  b: {c: 1}  # restated: why\n")[("a", "b", "c")] == "  b: {c: 1}  # restated: why"
+
+
+def test_the_control_asks_the_linear_schedule_for_its_mean_rate_over_the_runs_k():
+    """conf/schedule/constant_mu_linear_025.yaml types no number: eq. 10 of linear beta1 = 0.25 over K."""
+    for epochs in (200, 8):
+        control = compose_train(["task=push", "schedule=constant_mu_linear_025", f"epochs={epochs}"]).schedule
+        assert control.eps == schedule_from_record({"kind": "linear", "beta1": 0.25}).exact_mean_rate(epochs)
+    assert control.eps == 1 - 0.25 * 9 / 16
+    with pytest.raises(ConfigError, match="success adapts to the run"):
+        mean_rate({"kind": "success", "beta1": 0.25}, 200)

@@ -40,6 +40,10 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
     ((ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
     ((ScheduleConfig("linear", beta1=0.5), 1.0, 1.0, True), "linear b1=0.5-MEP"),
     ((ScheduleConfig("cosine", start=1.0, end=0.5), 1.0, 1.0, False), "cosine 1→0.5"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "td3"), "TD3 HER"),
+    # a learner class without a NAME of its own is recorded by its path and labelled by its class name
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "user_late.TD3Late"), "TD3Late HER"),
+    ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False, "my_pkg.learners.Late", 4), "Late linear b1=0.25 K=4"),
 ])
 def test_config_labels(settings, label):
     assert config_label(*settings) == label
@@ -197,3 +201,14 @@ def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp
     assert line.startswith("warning: schedule class users_own_steps.Step cannot be imported")
     assert "2 run logs skipped (step0/run.mcap and others)" in line and "on PYTHONPATH" in line
     assert "lacks or mistypes" not in line
+
+
+def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_path):
+    """precision=bf16 runs of HER beside fp32 ones: ``HER`` stays the fp32 runs' label (analysis/claims.py
+    looks it up), the others are ``HER precision=bf16``; no seed of one is pooled with the other."""
+    write_run(tmp_path / "fp32", make_config(epochs=load.PAPER_EPOCHS), np.zeros(3), complete=False)
+    bf16 = make_config(seed=1, epochs=load.PAPER_EPOCHS)
+    bf16.precision = "bf16"
+    write_run(tmp_path / "bf16", bf16, np.zeros(3), complete=False)
+    runs = load_runs(tmp_path).runs.set_index("path")
+    assert runs["config"].astype(str).to_dict() == {"fp32/run.mcap": "HER", "bf16/run.mcap": "HER precision=bf16"}

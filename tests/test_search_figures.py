@@ -1,8 +1,21 @@
-"""analysis/search_figures.py: the study figures command."""
+"""analysis/search_figures.py: the study figures command; a search over any settings, drawn and tabled."""
 
 from __future__ import annotations
 
+import sys
 
+import numpy as np
+import optuna
+import pandas as pd
+import pytest
+from analysis_logs import make_config
+from matplotlib.text import Text
+from user_schedules import MODULE, write_module
+
+from analysis.figures import SMALLEST_FONT
+from analysis.report import DPI, build_report
+from analysis.synthetic import write_run
+from hersd.contract.study import KIND_ATTR
 
 
 def test_the_search_figures_command_reports_a_bad_storage_in_one_line(storages, tmp_path, capsys):
@@ -12,3 +25,97 @@ def test_the_search_figures_command_reports_a_bad_storage_in_one_line(storages, 
     assert search_figures_main([str(storages / "study.db"), str(tmp_path), "--study", "other"]) == 2
     assert capsys.readouterr().err.count("\n") == 2
     assert search_figures_main([str(storages / "study.db"), str(tmp_path)]) == 0
+
+
+@pytest.fixture
+def newcomer_steps(tmp_path, monkeypatch):
+    """tests/user_schedules.py's module importable in this process (KStep: ``low`` and whole-number ``k0``
+    searched); forgotten afterwards."""
+    write_module(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield f"{MODULE}.KStep"
+    sys.modules.pop(MODULE, None)
+
+
+def _search(storage: str, name: str, draw) -> None:
+    """A study of six trials, ``draw(trial)`` drawing each one's settings -> its value; trial 3 fails, trial 4 is
+    pruned at its first report."""
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
+
+    def objective(trial: optuna.Trial) -> float:
+        value = draw(trial)
+        if trial.number == 3:
+            raise RuntimeError("a run failed")
+        if trial.number == 4:
+            trial.report(value, step=1)
+            raise optuna.TrialPruned()
+        return value
+
+    study.optimize(objective, n_trials=6, catch=(RuntimeError,))
+
+
+def test_a_search_of_an_outside_schedule_is_drawn_against_each_setting_and_tabled_with_them(newcomer_steps, tmp_path):
+    from analysis.search_figures import read_study
+    from analysis.studies import open_study_storage
+
+    def draw(trial):
+        trial.set_user_attr(KIND_ATTR, newcomer_steps)
+        return trial.suggest_float("low", 0.0, 1.0) + trial.suggest_int("k0", 1, 20) / 20
+
+    (tmp_path / "search").mkdir()
+    storage = f"sqlite:///{tmp_path / 'search' / 'kstep.db'}"
+    _search(storage, "kstep", draw)
+    write_run(tmp_path / "run", make_config(), np.linspace(0, 1, 6))
+    build_report(tmp_path, tmp_path / "out", log=lambda line: None)
+
+    assert sorted(path.name for path in (tmp_path / "out" / "search").iterdir()) == [
+        "kstep_best_trials.csv", "kstep_best_trials.md", "kstep_settings.png"]
+    study = optuna.load_study(study_name="kstep", storage=storage)
+    best = pd.read_csv(tmp_path / "out" / "search" / "kstep_best_trials.csv")
+    assert list(best.columns[:6]) == ["rank", "trial", "value", "kind", "low", "k0"]
+    assert "beta1" not in best and (best["kind"] == newcomer_steps).all() and len(best) == 4
+    assert best.iloc[0][["trial", "low", "k0"]].tolist() == pytest.approx(
+        [study.best_trial.number, study.best_params["low"], study.best_params["k0"]])
+    assert "| low | k0 |" in (tmp_path / "out" / "search" / "kstep_best_trials.md").read_text()
+    page = (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
+    assert "kstep: trials against low, k0" in page and "(β1, β2)" not in page
+
+    summary = read_study(open_study_storage(tmp_path / "search" / "kstep.db").storage, "kstep")
+    assert str(summary.trials["k0"].dtype) == "Int64"  # drawn as whole numbers, tabled as them
+    axes = [ax for ax in summary.figure().axes if ax.get_visible()]
+    assert [ax.get_xlabel() for ax in axes] == ["low", "k0"]  # a panel per searched setting, no plane
+    low, k0 = axes
+    assert k0.get_xlim()[0] < 1 and k0.get_xlim()[1] > 20 and low.get_xlim()[0] < 0 < 1 < low.get_xlim()[1]
+    complete_dots = low.collections[0].get_offsets()
+    assert len(complete_dots) == 4 and sorted(complete_dots[:, 1]) == pytest.approx(sorted(best["value"]))
+
+
+def test_a_search_of_decays_and_other_settings_draws_the_plane_above_a_panel_for_each_other(tmp_path):
+    from analysis.search_figures import StudySummary, read_study
+    from analysis.studies import open_study_storage
+
+    def draw(trial):
+        kind = trial.suggest_categorical("kind", ["constant", "linear", "exponential"])
+        value = trial.suggest_float("eps", 0.5, 1.0) if kind == "constant" else trial.suggest_float("beta1", 0, 1)
+        value += trial.suggest_float("beta2", -2, 2) if kind == "exponential" else 0.0
+        return value + trial.suggest_float("lambda_h", 0.25, 1.0)
+
+    _search(f"sqlite:///{tmp_path / 'mixed.db'}", "mixed", draw)
+    _search(f"sqlite:///{tmp_path / 'mixed.db'}", "decays", lambda trial: trial.suggest_float("beta1", 0, 1)
+            + trial.suggest_float("beta2", -2, 2))
+    storage = open_study_storage(tmp_path / "mixed.db").storage
+    mixed: StudySummary = read_study(storage, "mixed")
+    assert (mixed.settings, mixed.panels, mixed.figure_name) == (["beta1", "beta2", "eps", "lambda_h"],
+                                                                ["eps", "lambda_h"], "settings")
+    assert mixed.figure_title == "trials in the (β1, β2) plane and against eps, lambda_h"
+    figure = mixed.figure()
+    labels = [ax.get_xlabel() for ax in figure.axes if ax.get_visible() and ax.get_label() != "<colorbar>"]
+    assert labels[0].startswith(r"$\beta_1$") and labels[1:] == ["eps", "lambda_h"]
+    texts = [text for text in figure.findobj(Text) if text.get_text() and text.get_visible()]
+    assert min(text.get_fontsize() for text in texts) >= SMALLEST_FONT  # legible at the page's width:
+    assert figure.get_figwidth() * DPI <= 1248  # shown unscaled in a 1280-px window
+
+    decays = read_study(storage, "decays")  # eq. 9's decays alone: the plane, as before
+    assert (decays.panels, decays.figure_name, decays.figure_title) == ([], "beta_plane", "trials in the (β1, β2) plane")
+    assert list(decays.best.columns[:6]) == ["rank", "trial", "value", "kind", "beta1", "beta2"]

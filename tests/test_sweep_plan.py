@@ -88,6 +88,15 @@ def test_the_decay_or_mean_campaign_finishes_the_exponential_then_takes_turns_wi
     assert sum(run in shared for run in runs) == 10
 
 
+def test_the_bf16_campaign_trains_her_seeds_0_to_4_in_folders_apart_from_the_committed_fp32_ones(tmp_path):
+    runs = [Path(directory).relative_to(tmp_path) for _, directory in
+            listed("+grid=bf16_push", f"results_dir={tmp_path}")]
+    assert [(run.parent, run.name.split("-")[0]) for run in runs] == \
+        [(Path("push/her/constant-0.8"), f"seed{seed}") for seed in range(5)]
+    fp32 = {path.name for path in (RESULTS / "push/her/constant-0.8").iterdir()}
+    assert fp32 and not fp32 & {run.name for run in runs}
+
+
 @pytest.mark.parametrize("args, seeds", [
     (["task=reach", "epochs=1", "seeds=3"], [0, 1, 2]),  # no grid: seeds=N is N runs
     (["task=reach", "seeds=3", "schedule=linear", "schedule.beta1=0.5,0.7"], [0, 0, 1, 1, 2, 2]),  # seed by seed

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
 from helpers import TINY, command
 
 from hersd.contract.runlog import read_run
@@ -66,6 +67,7 @@ def test_a_schedule_outside_the_package_trains_sweeps_is_searched_and_reported(t
     assert all(f"step 0.9->{low:g}" in summary for low in (0.4, 0.3, 0.6))
     (trials,) = (results / "report" / "search").glob("*_best_trials.csv")
     assert trials.read_text().count("user_steps.Step") == 2  # the study's trials know their kind
+    assert "low" in pd.read_csv(trials) and len(list((results / "report" / "search").glob("*_settings.png"))) == 1
 
 
 def test_a_schedule_declared_by_an_entry_point_is_a_kind(tmp_path, monkeypatch):

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import gc
+import multiprocessing
+import time
+
 import pytest
 
 from analysis.workers import ForkedMap
@@ -13,3 +17,11 @@ def test_forked_jobs_give_the_results_in_order_and_raise_their_errors():
     assert ForkedMap(lambda x: x + 1, items, workers=1).results() == [x + 1 for x in items]  # in this process
     with pytest.raises(ZeroDivisionError):
         ForkedMap(lambda x: 1 / (x - 3), items, workers=2).results()
+
+
+def test_an_error_in_the_parent_while_the_workers_run_stops_them_and_unfreezes_the_objects():
+    with pytest.raises(RuntimeError, match="statistics failed"):
+        with ForkedMap(lambda seconds: time.sleep(seconds), [30.0, 30.0], workers=2):
+            assert gc.get_freeze_count() > 0
+            raise RuntimeError("statistics failed")  # as when the report's statistics raise while figures draw
+    assert gc.get_freeze_count() == 0 and multiprocessing.active_children() == []

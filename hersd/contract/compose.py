@@ -9,12 +9,26 @@ from __future__ import annotations
 
 from typing import Any
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from hersd.contract.config import ConfigError, TrainConfig, to_train_config
+from hersd.contract.schedules import schedule_from_record
 
 CONFIG_MODULE = "hersd.conf"
 CONFIG_PATH = f"pkg://{CONFIG_MODULE}"
+
+
+def mean_rate(schedule: dict[str, Any], epochs: int) -> float:
+    """``${hersd_mean_rate:{kind: linear, beta1: 0.25},${epochs}}`` in a YAML file: that schedule's exact mean
+    rate over K = ``epochs`` (eq. 10; :meth:`hersd.contract.schedules.Schedule.exact_mean_rate`), e.g. 0.874375 at K = 200:
+    a constant control asks the schedule it matches rather than typing its number."""
+    rate = schedule_from_record(dict(schedule)).exact_mean_rate(int(epochs))
+    if rate is None:
+        raise ConfigError(f"hersd_mean_rate: {schedule['kind']} adapts to the run, so it has no mean rate before it")
+    return rate
+
+
+OmegaConf.register_new_resolver("hersd_mean_rate", mean_rate, replace=True)  # on import, as every command composes
 
 
 def register_schema(name: str, node: Any, group: str | None = None) -> None:
