@@ -9,7 +9,7 @@ import platform
 from pathlib import Path
 from typing import Any
 
-from hersd.contract.cores import available_cores
+from hersd.contract.cores import available_cores, idle_cores, resolve_threads  # noqa: F401 (hersd.resources named them)
 
 
 def available_memory_bytes() -> int | None:
