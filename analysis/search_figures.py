@@ -295,8 +295,8 @@ def plot_settings(frame: pd.DataFrame, panels: list[str], ranges: dict[str, Sett
         ax.set_ylabel(wrap(value_label, 30))
     if not plane:  # the plane's legend names the marks
         counts = frame["state"].value_counts()
-        fig.legend(handles=marker_handles({state: int(counts.get(state, 0)) for state in ("complete", "pruned", "fail")}),
-                   loc="outside lower center", ncol=4, fontsize=LEGEND_SIZE, frameon=False)
+        marks = marker_handles({state: int(counts.get(state, 0)) for state in ("complete", "pruned", "fail")})
+        fig.legend(handles=marks, loc="outside lower center", ncol=4, fontsize=LEGEND_SIZE, frameon=False)
     return fig
 
 

@@ -22,8 +22,9 @@ from typing import Any, Callable
 
 from omegaconf import DictConfig
 
-from hersd.contract.compose import CONFIG_PATH, group_options
+from hersd.contract.compose import CONFIG_PATH, group_choices, group_options
 from hersd.contract.errors import ConfigError
+from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import available_cores, resolve_threads
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error
@@ -216,7 +217,7 @@ def launcher_options() -> list[str]:
 
 def usage() -> str:
     """``hersd-sweep --help``: the command, its groups (those a sweep takes) and keys."""
-    groups = [f"  {'+grid' if group == 'grid' else group}={'|'.join(group_options(group))}"
+    groups = [f"  {'+grid' if group == 'grid' else group}={'|'.join(group_choices(group))}"
               for group in ("grid", "task", "algo", "schedule", "learner")]
     return "\n".join([
         "usage: hersd-sweep [+grid=NAME] [KEY=VALUE ...] [--dry-run]", "",
@@ -247,6 +248,12 @@ def main() -> None:
         return
     if "--dry-run" in sys.argv:
         sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
+    for arg in sys.argv[1:]:  # a class by its path is no config of the group: one line saying what selects it
+        key, _, value = arg.partition("=")
+        if key.lstrip("+") == "learner" and (instead := typed_instead(value)):
+            print(f"hersd-sweep: error: {arg} names a class, which no config of the learner group holds; "
+                  f"type {instead}", file=sys.stderr)
+            sys.exit(2)
     register_schemas()
     os.environ.setdefault("HYDRA_FULL_ERROR", "0")
     try:
@@ -263,7 +270,7 @@ def main() -> None:
 
 def choices_line() -> str:
     """One line listing the grid/task/algo/schedule options and the top-level keys."""
-    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(group_options(group))}"
+    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(group_choices(group))}"
               for group in ("grid", "task", "algo", "schedule", "learner")]
     nested = ("task", "algo", "schedule", "ddpg", "learner")
     keys = [f.name for f in fields(SweepConfig) if f.name not in nested]

@@ -55,6 +55,10 @@ def test_every_search_config_composes_and_plans(name: str, tmp_path: Path) -> No
     ("search.storage=journal:", "search.storage=journal:<path> needs a file path"),
     ("search=nope", "search=nope is not a known search; choose one of: ci, default, wide"),
     ("results_dir=/proc/no-such-dir", "results_dir: cannot write to /proc/no-such-dir"),
+    # training overrides Hydra refuses: one line, as hersd-train says them
+    ("task=nope", "task=nope is not a known task; choose one of: custom, "),
+    ("foo.bar=1", "foo is not a config field; see hersd-train --help"),
+    ("epochs=abc", "epochs: Value 'abc' of type 'str' could not be converted to Integer"),
     ("--report", "--report was removed: hersd-search no longer draws figures; draw the study with hersd-report"),
 ])
 def test_bad_search_settings_fail_at_start(override: str, message: str, tmp_path: Path, capsys) -> None:

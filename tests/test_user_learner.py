@@ -60,6 +60,7 @@ def test_a_learner_outside_the_package_trains_sweeps_and_is_reported(tmp_path):
     command("analysis.report:main", [str(results)], tmp_path)
     runs = pd.read_csv(results / "report" / "tables" / "runs.csv")
     assert list(runs["learner"]) == ["user_late.TD3Late"] * 2 and runs["complete"].all()
+    assert all(label.startswith("TD3Late HER") for label in runs["config"])  # its class name, not its path
 
 
 @pytest.fixture
@@ -74,15 +75,72 @@ def user_late(tmp_path, monkeypatch):
     sys.modules.pop("user_late", None)
 
 
-def test_a_learner_declared_by_an_entry_point_is_selected_by_its_name(user_late):
-    from hersd.contract.config import TrainConfig
-
-    dist = user_late / "user_late-1.0.dist-info"
+def declare_entry_point(folder: Path) -> None:
+    """An installed distribution in ``folder`` declaring RegisteredLate as the learner ``late``."""
+    dist = folder / "user_late-1.0.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: user-late\nVersion: 1.0\n")
     (dist / "entry_points.txt").write_text("[hersd.learners]\nlate = user_late:RegisteredLate\n")
+
+
+def test_a_learner_declared_by_an_entry_point_is_selected_by_its_name(user_late):
+    from hersd.contract.config import TrainConfig
+
+    declare_entry_point(user_late)
     learner = TrainConfig(learner={"name": "late", "late": {"actor_start": 7}}).learner
     assert (learner.name, learner.settings.actor_start, learner.settings.policy_delay) == ("late", 7, 2)
+
+
+def test_a_learner_declared_by_an_entry_point_is_a_choice_of_the_learner_group(user_late):
+    """``learner=late`` as ``learner=td3``: in hersd-train (and its --help) and in a sweep beside DDPG."""
+    from hydra.core.config_store import ConfigStore
+
+    from hersd.engine.cli import usage
+    from hersd.contract.compose import compose_train
+
+    declare_entry_point(user_late)
+    try:
+        learner = compose_train(["task=reach", "learner=late", "learner.late.actor_start=7"]).learner
+        assert (learner.name, learner.settings.actor_start) == ("late", 7)
+        assert "  learner=ddpg|late|sac|td3" in usage().splitlines()
+    finally:
+        ConfigStore.instance().repo["learner"].pop("late.yaml", None)  # the entry point leaves with the folder
+    swept = command("sweeps.launch:main", ["task=reach", "seeds=1", "learner=ddpg,late", "--dry-run",
+                                           f"results_dir={user_late / 'results'}"], user_late)
+    assert [line.split()[1].split("/")[-3] for line in swept.stdout.splitlines() if line.startswith("  new ")] == [
+        "her", "late-her"]
+
+
+def test_a_class_given_as_a_learner_choice_is_one_line_saying_what_to_type(user_late, monkeypatch, capsys):
+    """``learner=<module>.<Class>`` names no config of the group: hersd-train, hersd-sweep and hersd-search each
+    say in one line (exit 2) what selects it, and what they say does."""
+    from hersd.engine.cli import main as train_main
+    from sweeps.launch import main as sweep_main
+    from sweeps.search.cli import main as search_main
+
+    def one_line(run) -> str:
+        with pytest.raises(SystemExit) as end:
+            run()
+        err = capsys.readouterr().err
+        assert end.value.code == 2 and err.count("\n") == 1, err
+        return err.strip()
+
+    said = "names a class, which no config of the learner group holds; type"
+    assert one_line(lambda: train_main(["task=reach", "learner=user_late.TD3Late"])) == (
+        f"hersd-train: error: learner=user_late.TD3Late {said} learner._target_=user_late.TD3Late")
+    assert one_line(lambda: search_main(["task=reach", "learner=user_late.TD3Late"])) == (
+        f"hersd-search: error: learner=user_late.TD3Late {said} learner._target_=user_late.TD3Late")
+    monkeypatch.setattr(sys, "argv", ["hersd-sweep", "task=reach", "learner=ddpg,user_late.TD3Late"])
+    assert one_line(sweep_main) == (
+        f"hersd-sweep: error: learner=ddpg,user_late.TD3Late {said} learner.name=ddpg,user_late.TD3Late")
+    assert one_line(lambda: train_main(["task=reach", "learner=mytd3"])) == (
+        "hersd-train: error: learner=mytd3 is not a known learner; choose one of: ddpg, sac, td3, "
+        "or a class of your own: learner._target_=<module>.<Class>")
+
+    swept = command("sweeps.launch:main", ["task=reach", "seeds=1", "learner.name=ddpg,user_late.TD3Late",
+                                           "--dry-run", f"results_dir={user_late / 'results'}"], user_late)
+    assert [line.split()[1].split("/")[-3] for line in swept.stdout.splitlines() if line.startswith("  new ")] == [
+        "her", "td3late-her"]
 
 
 def test_a_setting_the_learner_lacks_is_one_line(user_late):

@@ -12,6 +12,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from hersd.contract.config import ConfigError, TrainConfig, to_train_config
+from hersd.contract.learner_registry import TARGET_KEY, entry_point_names, typed_instead
 from hersd.contract.schedules import schedule_from_record
 
 CONFIG_MODULE = "hersd.conf"
@@ -51,8 +52,13 @@ def open_schedule(schema: type) -> DictConfig:
 
 
 def register_train_schema() -> None:
-    """``train_schema``, which conf/train.yaml lists first."""
+    """``train_schema``, which conf/train.yaml lists first; and ``learner=<name>`` for each learner another package
+    declares (an entry point of ``hersd.learners``), as conf/learner/<name>.yaml is for the package's."""
     register_schema("train_schema", open_schedule(TrainConfig))
+    files = set(group_options("learner"))
+    for name in entry_point_names():
+        if name not in files:
+            register_schema(name, {"name": name}, group="learner")
 
 
 def compose(config_name: str | None, overrides: list[str], job_name: str, with_hydra: bool = False) -> DictConfig:
@@ -79,6 +85,11 @@ def group_options(group: str) -> list[str]:
         if folder.is_dir() else []
 
 
+def group_choices(group: str) -> list[str]:
+    """A group's choices on the command line: its configs, and for ``learner`` the learners of other packages."""
+    return sorted({*group_options(group), *(entry_point_names() if group == "learner" else ())})
+
+
 def explain_config_error(err: Exception, what: str = "config field", see: str = "hersd-train --help") -> str:
     """Hydra/OmegaConf composition errors -> one line naming the field and the choices."""
     from hydra.errors import MissingConfigException
@@ -88,9 +99,12 @@ def explain_config_error(err: Exception, what: str = "config field", see: str = 
         return str(err)
     if isinstance(err, MissingConfigException) and err.missing_cfg_file:
         group, _, value = err.missing_cfg_file.partition("/")
+        if group == "learner" and value and (instead := typed_instead(value)):
+            return f"learner={value} names a class, which no config of the learner group holds; type {instead}"
         choices = sorted(err.options) if err.options is not None else group_options(group)
         return (f"{group}={value} is not a known {group}" if value else f"{err.missing_cfg_file} is unknown") + \
-            (f"; choose one of: {', '.join(choices)}" if choices else "")
+            (f"; choose one of: {', '.join(choices)}" if choices else "") + \
+            (f", or a class of your own: {TARGET_KEY}=<module>.<Class>" if group == "learner" else "")
     cause = err.__cause__ if err.__cause__ is not None else err
     key = getattr(cause, "full_key", None)
     if isinstance(cause, (ConfigAttributeError, ConfigKeyError)) and key:

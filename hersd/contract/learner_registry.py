@@ -18,6 +18,7 @@ from hersd.contract.errors import ConfigError
 
 LEARNERS: dict[str, type] = {}  # NAME -> learner class, filled as the classes are defined
 ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
+TARGET_KEY = "learner._target_"  # a class by its path: learner._target_=<module>.<Class>
 
 
 def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
@@ -42,6 +43,21 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     if settings is not None and not dataclasses.is_dataclass(settings):
         raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {settings!r}")
     return cls
+
+
+def entry_point_names() -> list[str]:
+    """The names other packages' learners are declared under (entry points of :data:`ENTRY_POINT_GROUP`), sorted:
+    each a ``learner=<name>`` choice beside conf/learner/'s (:func:`hersd.compose.register_train_schema`)."""
+    return sorted({point.name for point in entry_points(group=ENTRY_POINT_GROUP)})
+
+
+def typed_instead(choice: str) -> str | None:
+    """What to type for ``learner=<choice>`` (a value, or a sweep's comma list) naming a class by its path, which
+    no config of the group can hold: ``learner._target_=<choice>`` for one class, ``learner.name=<choice>`` for a
+    list (``learner.name`` takes names and class paths alike); None when no item is a path."""
+    if not any("." in item for item in choice.split(",")):
+        return None
+    return f"learner.name={choice}" if "," in choice else f"{TARGET_KEY}={choice}"
 
 
 def recorded_name(cls: type) -> str:

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hersd.contract.compose import compose_train, explain_config_error, group_options
+from hersd.contract.compose import compose_train, explain_config_error, group_choices
 from hersd.contract.config import PACKAGE_LEARNERS, ConfigError, TrainConfig
 from hersd.contract.schedules import TARGET_KEY, known_kinds, schedule_class
 from hersd.contract.runstore import RunLockedError, check_writable, run_dir
@@ -84,7 +84,7 @@ def chosen_schedules(argv: list[str]) -> list[str]:
 def usage(argv: list[str] = ()) -> str:
     """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
     with the package's kinds (ConfigError if it cannot be imported)."""
-    groups = [f"  {group}={'|'.join(group_options(group))}" for group in GROUPS]
+    groups = [f"  {group}={'|'.join(group_choices(group))}" for group in GROUPS]
     return "\n".join([
         "usage: hersd-train [KEY=VALUE ...]", "",
         "Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same",

@@ -15,7 +15,7 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from hersd.contract.compose import compose_train
+from hersd.contract.compose import compose_train, explain_config_error
 from hersd.contract.config import ConfigError, ScheduleConfig, TrainConfig
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
@@ -99,8 +99,14 @@ def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str
     """Compose the base training config once; check it and derive the study's name, storage and settings."""
     # search_name (the conf/search file) and the search space (kinds, ranges) are part of the default study
     # name: another file or another space starts another study; n_trials and the workers do not.
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
     refuse_searched_keys(train_overrides, search)
-    base = compose_train(train_overrides)
+    try:
+        base = compose_train(train_overrides)
+    except (HydraException, OmegaConfBaseException) as err:  # an unknown choice or key: one line, as hersd-train's
+        raise ConfigError(explain_config_error(err)) from None
     if not any(override.split("=", 1)[0].lstrip("+~") == "quiet" for override in train_overrides):
         base = replace(base, quiet=True)  # workers' per-epoch lines would interleave
     steps = search.seeds * base.epochs
