@@ -43,7 +43,7 @@ from optuna.trial import FrozenTrial, TrialState  # noqa: E402
 
 from analysis.figures import LEGEND_SIZE, PANEL_SIZE, wrap  # noqa: E402
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.contract.config import ConfigError  # noqa: E402
+from hersd.contract.errors import ConfigError  # noqa: E402
 from hersd.contract.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
 from hersd.contract.study import (KIND_ATTR, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402

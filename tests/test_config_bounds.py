@@ -17,8 +17,8 @@ import hersd.engine.run_state
 import hersd.engine.train
 from hersd.engine.cli import main
 from hersd.contract.compose import compose_train
-from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, ConfigError, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig,
-                          TD3Config, TrainConfig)
+from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig, TD3Config, TrainConfig)
+from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import EnvSpec
 from hersd.contract.runlog import read_run
 from hersd.contract.runstore import CHECKPOINT_NAME

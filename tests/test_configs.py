@@ -15,7 +15,7 @@ from hersd.contract.runlog import read_run
 from hersd.contract.runstore import config_hash
 from hersd.contract.schedules import schedule_from_record
 from hersd.contract.tasks import CUSTOM, TASKS
-from sweeps.launch import register_schemas
+from sweeps.plan import register_schemas
 
 
 @pytest.mark.parametrize("group", ["task", "algo", "schedule", "learner"])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hersd.contract.compose import compose_train
-from hersd.contract.config import ConfigError
+from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import env_spec, make_env
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.replay.buffer import sample_transitions

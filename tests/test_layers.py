@@ -160,6 +160,35 @@ def test_the_contract_analysis_and_the_sweep_planner_load_neither_torch_nor_mujo
     assert out.strip() == "[]"
 
 
+def defined_names(path: Path) -> set[str]:
+    """The names a module defines at its top level itself (def, class, assignment), not those it imports."""
+    names = set()
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names |= {name.id for target in targets for name in ast.walk(target) if isinstance(name, ast.Name)}
+    return names
+
+
+def test_every_name_is_imported_from_the_module_that_defines_it():
+    """A fact is stated once, in the module that owns it, and asked of that module: ``from m import n`` names the
+    module defining n (e.g. ConfigError from hersd.contract.errors, not through hersd.contract.config, which
+    imports it). A package's ``__init__`` is its face: importing through it is allowed."""
+    modules = {module_name(path): path for path in files()}
+    wrong = []
+    for path in files() + sorted((ROOT / "tests").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            source = modules.get(node.module) if isinstance(node, ast.ImportFrom) and not node.level else None
+            if source is None or source.name == "__init__.py":
+                continue
+            defined = defined_names(source)
+            wrong += [f"{path.relative_to(ROOT)}:{node.lineno} imports {alias.name} through {node.module}"
+                      for alias in node.names if alias.name not in defined and f"{node.module}.{alias.name}" not in modules]
+    assert not wrong, wrong
+
+
 def test_no_function_is_longer_than_60_lines_without_a_reason():
     """A longer function must say why on its ``def`` line (a comment containing 'long:')."""
     too_long = []

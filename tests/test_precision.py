@@ -14,7 +14,8 @@ from torch import nn
 
 import hersd.engine.learners.base as base
 from hersd.contract.compose import compose_train
-from hersd.contract.config import ConfigError, DDPGConfig, LearnerConfig, TrainConfig, config_record
+from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig, config_record
+from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import env_spec, make_env
 from hersd.engine.learners import learner_class
 from hersd.engine.run_state import discounting

@@ -16,7 +16,8 @@ import pytest
 
 from analysis.synthetic import write_run
 from hersd.contract.compose import compose_train
-from hersd.contract.config import ConfigError, TrainConfig, config_record
+from hersd.contract.config import TrainConfig, config_record
+from hersd.contract.errors import ConfigError
 from hersd.contract.runstore import (CHECKPOINT_NAME, LOCK_NAME, NOT_HASHED, RunFolder, RunLockedError, check_writable,
                             config_hash, keep_aside, remove_if_unused, run_dir, run_identity)
 

@@ -120,7 +120,8 @@ def test_cosine_runs_from_start_to_end_and_its_exact_mean_rate_is_its_formulas()
 
 def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
     from analysis.synthetic import write_run
-    from hersd.contract.config import ConfigError, TrainConfig
+    from hersd.contract.config import TrainConfig
+    from hersd.contract.errors import ConfigError
 
     inline = TrainConfig(schedule={"kind": "table", "rates": [0.9, 0.8, 0.7]}, epochs=3).schedule
     assert list(inline.epoch_rates(3)) == [0.9, 0.8, 0.7] and inline.exact_mean_rate(3) == pytest.approx(0.8)

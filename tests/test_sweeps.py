@@ -96,7 +96,7 @@ def test_help_names_the_command_and_only_the_groups_a_sweep_takes():
 
 def test_the_local_launcher_runs_one_per_core_in_the_listed_order(tmp_path):
     from hersd.contract.compose import compose
-    from sweeps.launch import register_schemas
+    from sweeps.plan import register_schemas
 
     register_schemas()
     launcher = compose("sweep", ["+grid=smoke"], job_name="test", with_hydra=True).hydra.launcher
@@ -217,7 +217,7 @@ def test_a_run_held_by_another_process_is_reported_busy_not_run(tmp_path):
 def launcher_config(*overrides: str):
     """The composed ``hydra.launcher`` node of a sweep with these overrides."""
     from hersd.contract.compose import compose
-    from sweeps.launch import register_schemas
+    from sweeps.plan import register_schemas
 
     register_schemas()
     return compose("sweep", ["+grid=smoke", *overrides], job_name="test", with_hydra=True).hydra.launcher

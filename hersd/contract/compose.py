@@ -11,7 +11,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from hersd.contract.config import ConfigError, TrainConfig, to_train_config
+from hersd.contract.config import TrainConfig, to_train_config
+from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import TARGET_KEY, entry_point_names, typed_instead
 from hersd.contract.schedules import schedule_from_record
 

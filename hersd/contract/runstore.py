@@ -30,7 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from hersd.contract.config import ConfigError, TrainConfig, config_record, learner_key
+from hersd.contract.config import TrainConfig, config_record, learner_key
+from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import LOG_NAME, RunLogError, RunRecords, read_records
 
 CHECKPOINT_NAME = "checkpoint.pt"

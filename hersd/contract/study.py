@@ -22,7 +22,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from hersd.contract.config import ConfigError, TrainConfig
+from hersd.contract.config import TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import SCHEDULES, Schedule, known_kinds, schedule_class
 
 JOURNAL_PREFIX = "journal:"

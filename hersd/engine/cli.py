@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from hersd.contract.compose import compose_train, explain_config_error, group_choices
-from hersd.contract.config import PACKAGE_LEARNERS, ConfigError, TrainConfig
+from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import TARGET_KEY, known_kinds, schedule_class
 from hersd.contract.runstore import RunLockedError, check_writable, run_dir
 

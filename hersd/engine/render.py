@@ -29,7 +29,8 @@ import numpy as np
 import torch
 from PIL import Image
 
-from hersd.contract.config import ConfigError, TaskConfig, TrainConfig, to_train_config
+from hersd.contract.config import TaskConfig, TrainConfig, to_train_config
+from hersd.contract.errors import ConfigError
 from hersd.engine.denormals import denormals_flushed, set_intra_op_threads
 from hersd.engine.learners import GoalConditionedLearner
 from hersd.engine.envs.make import env_spec, make_env, step_success

@@ -27,7 +27,7 @@ def resolve_device(device: str) -> Any:
     """``auto`` -> cuda if available else cpu; ``cuda[:N]`` must be available (else ConfigError)."""
     import torch
 
-    from hersd.contract.config import ConfigError
+    from hersd.contract.errors import ConfigError
 
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from hersd.contract.config import ConfigError, TrainConfig
+from hersd.contract.config import TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.learners import GoalConditionedLearner, learner_class

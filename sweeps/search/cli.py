@@ -18,7 +18,7 @@ from typing import NoReturn
 import optuna
 from optuna.storages import BaseStorage
 
-from hersd.contract.config import ConfigError
+from hersd.contract.errors import ConfigError
 from hersd.contract.study import found_by_report, shown, storage_file
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search

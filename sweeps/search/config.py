@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, Optional
 
 from hersd.contract.compose import compose, explain_config_error, group_options, register_schema as store_schema
-from hersd.contract.config import ConfigError
+from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
 from hersd.contract.schedules import Exponential, known_kinds, schedule_class

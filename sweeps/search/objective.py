@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 import optuna
 
-from hersd.contract.config import ConfigError, TrainConfig
+from hersd.contract.config import TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_records
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from hersd.contract.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, one_line, mean_rates, param_overrides, trial_config

@@ -16,7 +16,8 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from hersd.contract.compose import compose_train, explain_config_error
-from hersd.contract.config import ConfigError, ScheduleConfig, TrainConfig
+from hersd.contract.config import ScheduleConfig, TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
 from hersd.contract.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config

@@ -16,7 +16,7 @@ from optuna.exceptions import ExperimentalWarning, UpdateFinishedTrialError
 from optuna.storages import BaseStorage
 from optuna.trial import FrozenTrial, TrialState
 
-from hersd.contract.config import ConfigError
+from hersd.contract.errors import ConfigError
 from hersd.contract.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
 from sweeps.search.config import SamplerConfig, enqueued_params, space_record
 from sweeps.search.plan import SearchPlan

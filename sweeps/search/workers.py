@@ -21,7 +21,7 @@ from typing import Any
 import optuna
 
 from hersd.contract.compose import CONFIG_MODULE
-from hersd.contract.config import ConfigError
+from hersd.contract.errors import ConfigError
 from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective

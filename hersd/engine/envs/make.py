@@ -25,7 +25,8 @@ from typing import Any, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from hersd.contract.config import ConfigError, TaskConfig
+from hersd.contract.config import TaskConfig
+from hersd.contract.errors import ConfigError
 from hersd.engine.envs.goal_envs import GOAL_KEYS, is_goal_env, reward_family, reward_range, success_radius
 
 # gymnasium-robotics prints a notice about the Adroit envs' rewards at import; it does not
