@@ -25,7 +25,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
-from analysis.load import ARCHER_WEIGHTS, HER_EPS, HER_WEIGHTS, PAPER_EPOCHS  # noqa: E402
+from analysis.load import HER_EPS, HER_WEIGHTS, PAPER_EPOCHS  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 from hersd.contract.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
 from hersd.contract.tasks import task_rank, task_title  # noqa: E402
@@ -83,7 +83,7 @@ def _lines(text: str) -> int:
 def _config_table(analysis: Analysis) -> pd.DataFrame:
     """One row per config (its schedule and reward weights), in config order."""
     return (analysis.runs.drop_duplicates("config").set_index("config")
-            .loc[:, ["schedule", "schedule_tag", "constant_rate", "adaptive", "eps", "beta1", "beta2", "lambda_r",
+            .loc[:, ["algo", "schedule", "schedule_tag", "constant_rate", "adaptive", "eps", "beta1", "beta2", "lambda_r",
                      "lambda_h", "mep", "total_epochs"]]
             .sort_index())
 
@@ -135,7 +135,7 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
     used: dict[tuple, int] = {}
     for config, row in configs.iterrows():
         colour = colours[row["schedule_tag"]]
-        if row["constant_rate"] and (row["lambda_r"], row["lambda_h"]) == ARCHER_WEIGHTS:
+        if row["constant_rate"] and row["algo"].removesuffix("_mep") == "archer":
             colour = "0.55"
         linestyle = "--" if row["mep"] else schedule_class(row["schedule"]).line
         repeats = used.get((colour, linestyle), 0)

@@ -20,12 +20,14 @@ own rule) are told apart by the settings that differ.
 from __future__ import annotations
 
 import json
+from importlib import resources
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, NamedTuple, Sequence
 
 import numpy as np
 import pandas as pd
+import yaml
 
 from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
@@ -62,11 +64,19 @@ RUN_COLUMNS = (
     "path",           # the log's path relative to the loaded folder
 )
 
-# The baselines the labels name: HER's relabel rate (the schedule's default), HER's and ARCHER's
-# reward weights (lambda_r, lambda_h); ARCHER halves hindsight rewards (conf/algo/archer.yaml).
+
+
+def preset_weights(algo: str) -> tuple[float, float]:
+    """(lambda_r, lambda_h) of the preset ``conf/algo/<algo>.yaml`` (the schema's defaults where it sets none)."""
+    preset = yaml.safe_load((resources.files("hersd.conf") / "algo" / f"{algo}.yaml").read_text()) or {}
+    return float(preset.get("lambda_r", AlgoConfig().lambda_r)), float(preset.get("lambda_h", AlgoConfig().lambda_h))
+
+
+# The baselines the labels name: HER's relabel rate (the schedule's default), HER's reward weights (the
+# schema's) and ARCHER's (conf/algo/archer.yaml: hindsight rewards halved).
 HER_EPS = Constant().eps
 HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
-ARCHER_WEIGHTS = (1.0, 0.5)
+ARCHER_WEIGHTS = preset_weights("archer")
 PAPER_EPOCHS = TrainConfig().epochs  # K of the paper's runs (the default): the one K a label leaves unsaid
 PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
 READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
@@ -103,21 +113,23 @@ def variant(settings: dict[str, Any]) -> list[str]:
 
 
 def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg",
-                 epochs: int = PAPER_EPOCHS, variants: Sequence[str] = ()) -> str:
+                 epochs: int = PAPER_EPOCHS, variants: Sequence[str] = (), algo: str = "her") -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
     than the paper's DDPG lead the label: :func:`learner_label`), ``HER precision=bf16``
     (``variants``: :func:`variant`), ``HER K=4`` (``epochs``, K, other than PAPER_EPOCHS).
 
-    Constant-rate schedules are HER (HER_WEIGHTS) or ARCHER (ARCHER_WEIGHTS), with ``eps=``
-    appended when eps != HER_EPS; others are named by their label (:meth:`Schedule.label`); other
-    reward weights are appended as ``λr=`` / ``λh=``, then K as ``K=``: runs of different K never share a label.
+    Constant-rate schedules are HER or ARCHER by the run's logged ``algo`` name (config.algo.name: archer,
+    archer_mep), with ``eps=`` appended when eps != HER_EPS and reward weights other than that algo's preset's;
+    others are named by their label (:meth:`Schedule.label`) with reward weights other than HER's appended as
+    ``λr=`` / ``λh=``; then K as ``K=``: runs of different K never share a label.
     """
     if schedule.constant_rate:
         eps = schedule.rate(1, 1)
-        name = "ARCHER" if (lambda_r, lambda_h) == ARCHER_WEIGHTS else "HER"
+        archer = algo.removesuffix("_mep") == "archer"
+        name = "ARCHER" if archer else "HER"
         qualifiers = [f"eps={eps:g}"] if eps != HER_EPS else []
-        if (lambda_r, lambda_h) in (HER_WEIGHTS, ARCHER_WEIGHTS):
+        if archer and (lambda_r, lambda_h) == ARCHER_WEIGHTS:
             lambda_r, lambda_h = HER_WEIGHTS  # already said by the name
     else:
         name, qualifiers = schedule.label(), []
@@ -340,7 +352,7 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     def label(index: int, epochs: int = PAPER_EPOCHS) -> str:
         row = rows[index]
         return config_label(schedules[index], row["lambda_r"], row["lambda_h"], row["mep"], row["learner"], epochs,
-                            variants[index])
+                            variants[index], row["algo"])
 
     labels = [label(index) for index in range(len(rows))]
     epochs_of: dict[str, set[int]] = {}

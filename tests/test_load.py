@@ -33,7 +33,7 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
 
 @pytest.mark.parametrize("settings, label", [
     ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False), "HER"),
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 0.5, False), "ARCHER"),
+    ((ScheduleConfig("constant", eps=0.8), 1.0, 0.5, False), "HER λh=0.5"),  # ARCHER by its name only
     ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, True), "HER-MEP"),
     ((ScheduleConfig("constant", eps=0.9), 1.0, 1.0, False), "HER eps=0.9"),
     ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False), "linear b1=0.25"),
@@ -212,3 +212,12 @@ def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_pa
     write_run(tmp_path / "bf16", bf16, np.zeros(3), complete=False)
     runs = load_runs(tmp_path).runs.set_index("path")
     assert runs["config"].astype(str).to_dict() == {"fp32/run.mcap": "HER", "bf16/run.mcap": "HER precision=bf16"}
+
+
+@pytest.mark.parametrize("algo, lambda_h, mep, label", [
+    ("archer", 0.5, False, "ARCHER"), ("archer_mep", 0.5, True, "ARCHER-MEP"), ("archer", 0.25, False, "ARCHER λh=0.25"),
+    ("her", 0.5, False, "HER λh=0.5"),
+])
+def test_archer_is_recognised_by_its_logged_name_and_its_weights_read_from_its_preset(algo, lambda_h, mep, label):
+    assert load.ARCHER_WEIGHTS == (1.0, 0.5)  # conf/algo/archer.yaml
+    assert config_label(ScheduleConfig("constant", eps=0.8), 1.0, lambda_h, mep, algo=algo) == label
