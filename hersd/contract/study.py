@@ -39,7 +39,8 @@ DRIVER_HINTS = {"postgresql": 'pip install "hersd[cluster]" (psycopg2, which pos
 SCHEMES = "use sqlite:///<file>, postgresql://..., another SQLAlchemy URL, or journal:<file>"
 MESSAGE_LIMIT = 200  # characters of a database's own error message kept in ours
 
-PARAM_NAMES = ("kind", "beta1", "beta2", "eps", "lambda_h")  # the parameters of the paper's kinds' trials
+REWARD_PARAM = "lambda_h"  # the one setting a search may draw outside the schedule: algo.lambda_h
+PARAM_NAMES = ("kind", "beta1", "beta2", "eps", REWARD_PARAM)  # the parameters of the paper's kinds' trials
 
 # User attributes hersd-search writes and hersd-report reads. The search's own bookkeeping
 # (trial attributes worker, heartbeat, interrupted, refused, lost, pruned_reason, mu_eps,
@@ -170,7 +171,7 @@ def trial_params(stored: dict[str, Any], kind: str | None = None) -> dict[str, A
     else the registered kind whose searched parameters they are (None if none fits: trials of earlier searches)."""
     if "kind" in stored:
         return dict(stored)
-    names = set(stored) - {"lambda_h"}
+    names = set(stored) - {REWARD_PARAM}
     kind = kind or next((kind for kind in known_kinds() if set(kind_params(kind)) == names), None)
     return {"kind": kind, **stored}
 
@@ -183,7 +184,7 @@ def schedule_config(params: dict[str, Any]) -> Schedule:
 
 def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: str | None = None) -> TrainConfig:
     """One run of a trial: ``base`` with the trial's schedule (and lambda_h), ``seed`` and ``threads``."""
-    algo = replace(base.algo, lambda_h=float(params["lambda_h"])) if "lambda_h" in params else base.algo
+    algo = replace(base.algo, lambda_h=float(params[REWARD_PARAM])) if REWARD_PARAM in params else base.algo
     return replace(base, schedule=schedule_config(params), algo=algo, seed=seed, threads=threads or base.threads)
 
 
@@ -193,7 +194,7 @@ def param_overrides(params: dict[str, Any]) -> list[str]:
     kind = params["kind"]
     chosen = f"schedule={kind}" if kind in SCHEDULES else f"schedule.kind={kind}"
     overrides = [chosen] + [f"schedule.{name}={float(params[name])!r}" for name in kind_params(kind)]
-    return overrides + ([f"algo.lambda_h={float(params['lambda_h'])!r}"] if "lambda_h" in params else [])
+    return overrides + ([f"algo.{REWARD_PARAM}={float(params[REWARD_PARAM])!r}"] if REWARD_PARAM in params else [])
 
 
 def mean_rates(params: dict[str, Any], epochs: int) -> tuple[float, float]:

@@ -17,7 +17,7 @@ from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
 from hersd.contract.schedules import Exponential, known_kinds, schedule_class
-from hersd.contract.study import JOURNAL_PREFIX, kind_params, schedule_config, searchable, stored_params
+from hersd.contract.study import JOURNAL_PREFIX, REWARD_PARAM, kind_params, schedule_config, searchable, stored_params
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")
@@ -146,7 +146,7 @@ def space_record(space: SpaceConfig) -> dict[str, Any]:
 def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
     """The ranges the search draws from, by parameter name (unused ranges left out)."""
     named = {name: space_bounds(space, kind, name) for kind in space.kinds for name in kind_params(kind)}
-    return {**named, "lambda_h": space.lambda_h} if space.lambda_h is not None else named
+    return {**named, REWARD_PARAM: space.lambda_h} if space.lambda_h is not None else named
 
 
 def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
@@ -218,7 +218,7 @@ def enqueued_kind(params: dict[str, Any], kinds: list[str]) -> str | None:
     # e.g. with kinds [linear, exponential]: {beta1, beta2} is exponential, {beta1} is ambiguous
     if "kind" in params or len(kinds) == 1:
         return params.get("kind", kinds[0])
-    names = set(params) - {"lambda_h"}
+    names = set(params) - {REWARD_PARAM}
     fitting = [kind for kind in kinds if names <= set(kind_params(kind))]
     return fitting[0] if len(fitting) == 1 else None
 
@@ -228,7 +228,7 @@ def taken_by(params: dict[str, Any], kinds: list[str]) -> bool:
     keys are among a searched kind's parameters."""
     if "kind" in params:
         return params["kind"] in kinds
-    return any(set(params) - {"lambda_h"} <= set(kind_params(kind)) for kind in kinds)
+    return any(set(params) - {REWARD_PARAM} <= set(kind_params(kind)) for kind in kinds)
 
 
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
@@ -245,7 +245,7 @@ def check_enqueue(search: SearchConfig) -> None:
         kind = enqueued_kind(params, kinds)
         _check(kind in kinds, f"{where}: kind={params.get('kind')!r} is not among search.space.kinds {kinds}"
                if "kind" in params else f"{where}: say which kind it is (kind: one of {kinds})")
-        allowed = kind_params(kind) + (("lambda_h",) if search.space.lambda_h is not None else ())
+        allowed = kind_params(kind) + ((REWARD_PARAM,) if search.space.lambda_h is not None else ())
         extra = sorted(map(str, set(params) - {"kind", *allowed}))
         _check(not extra, f"{where}: {', '.join(extra)} not searched for kind {kind}; its parameters: "
                           f"{', '.join(allowed)}")
@@ -253,7 +253,7 @@ def check_enqueue(search: SearchConfig) -> None:
             _check(name not in params or _is_number(params[name]),
                    f"{where}.{name} must be a finite number, got {params.get(name)!r}")
         check_schedule(kind, params, where)
-        _check(params.get("lambda_h", 1.0) > 0, f"{where}.lambda_h must be > 0, got {params.get('lambda_h')}")
+        _check(params.get(REWARD_PARAM, 1.0) > 0, f"{where}.{REWARD_PARAM} must be > 0, got {params.get(REWARD_PARAM)}")
 
 
 def validate(search: SearchConfig) -> None:

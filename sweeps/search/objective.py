@@ -25,7 +25,8 @@ from hersd.contract.config import TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_records
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
-from hersd.contract.study import KIND_ATTR, RUN_DIRS_ATTR, kind_params, one_line, mean_rates, param_overrides, trial_config
+from hersd.contract.study import (KIND_ATTR, REWARD_PARAM, RUN_DIRS_ATTR, kind_params, mean_rates, one_line, param_overrides,
+                                  trial_config)
 from sweeps.search.config import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
 from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR
@@ -37,9 +38,9 @@ def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
     kinds = list(space.kinds)
     kind = trial.suggest_categorical("kind", kinds) if len(kinds) > 1 else kinds[0]
     params: dict[str, Any] = {"kind": kind}
-    for name in kind_params(kind) + (("lambda_h",) if space.lambda_h is not None else ()):
-        bounds = space.lambda_h if name == "lambda_h" else space_bounds(space, kind, name)
-        if name != "lambda_h" and whole_number(kind, name):  # the type the schedule declares
+    for name in kind_params(kind) + ((REWARD_PARAM,) if space.lambda_h is not None else ()):
+        bounds = space.lambda_h if name == REWARD_PARAM else space_bounds(space, kind, name)
+        if name != REWARD_PARAM and whole_number(kind, name):  # the type the schedule declares
             params[name] = trial.suggest_int(name, math.ceil(bounds.low), math.floor(bounds.high), log=bounds.log)
         else:
             params[name] = trial.suggest_float(name, bounds.low, bounds.high, log=bounds.log)

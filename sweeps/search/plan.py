@@ -20,7 +20,7 @@ from hersd.contract.config import ScheduleConfig, TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
-from hersd.contract.study import SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
+from hersd.contract.study import REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
 from sweeps.search.storage import resolve_storage
 from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds, space_record
 
@@ -86,7 +86,7 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
             params = {"kind": kind, **{name: getattr(space_bounds(search.space, kind, name), end)
                                        for name in kind_params(kind)}}
             if search.space.lambda_h is not None:
-                params["lambda_h"] = getattr(search.space.lambda_h, end)
+                params[REWARD_PARAM] = getattr(search.space.lambda_h, end)
             probes.append((f"search.space ({kind}, {end} ends)", params))
     for where, params in probes:
         for seed in (search.first_seed, last_seed):
