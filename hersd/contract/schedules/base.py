@@ -26,7 +26,8 @@ from hersd.contract.errors import ConfigError
 # The settings every log of the paper's kinds (constant, linear, exponential, success) holds, at
 # these values where the kind has no such setting: one flat schema served them when those logs
 # were written, and their folders' hashes cover these fields (hersd.contract.runstore.run_identity).
-FLAT_RECORD: dict[str, Any] = {"eps": 0.8, "beta1": 0.0, "beta2": 0.0, "mean_rate": None, "window": 10,
+HER_RATE = 0.8  # HER's relabel rate (the reference code's replay_k = 4): the constant kind's default
+FLAT_RECORD: dict[str, Any] = {"eps": HER_RATE, "beta1": 0.0, "beta2": 0.0, "mean_rate": None, "window": 10,
                                "eps_min": 0.0}
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-from hersd.contract.schedules.base import Schedule, param
+from hersd.contract.schedules.base import HER_RATE, Schedule, param
 
 
 @dataclass
@@ -17,7 +17,7 @@ class Constant(Schedule):
     searched = ("eps",)
     flat_record = True
 
-    eps: float = param(0.8, 0.0, 1.0, "the fixed relabel rate (HER: 0.8, i.e. replay_k = 4)")
+    eps: float = param(HER_RATE, 0.0, 1.0, "the fixed relabel rate (HER: 0.8, i.e. replay_k = 4)")
 
     def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         return float(self.eps)
