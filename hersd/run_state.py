@@ -19,6 +19,7 @@ from hersd.config import ConfigError, TrainConfig
 from hersd.envs.make import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.envs.goal_envs import vectorised_reward
 from hersd.learners import GoalConditionedLearner, learner_class
+from hersd.learners.fast import fast_learner_class
 from hersd.replay.mep import EpisodePrioritizer
 from hersd.replay.buffer import EpisodeBuffer
 from hersd.resources import available_memory_bytes
@@ -127,8 +128,10 @@ def discounting(cfg: TrainConfig, spec: EnvSpec) -> tuple[float, tuple[float, fl
 def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_range: tuple[float, float],
                device: torch.device) -> GoalConditionedLearner:
     """The learner of ``cfg.learner.name``: a :class:`GoalConditionedLearner` (act, update, update_targets, ...),
-    built by its class (hersd/learners/), which decides whether its target is clipped to ``q_range``."""
-    return learner_class(cfg.learner.name).build(cfg, spec, gamma, q_range, device)
+    built by its class (hersd/learners/), which decides whether its target is clipped to ``q_range``; with
+    ``update=fast`` its hand-written update's subclass (hersd/learners/fast.py)."""
+    cls = learner_class(cfg.learner.name)
+    return (fast_learner_class(cls) if cfg.update == "fast" else cls).build(cfg, spec, gamma, q_range, device)
 
 
 def env_bytes(env: Any) -> int:
