@@ -14,8 +14,10 @@ move. Measured here, one after another, and printed with their ratios:
     holding what 30 paper epochs store (3,000 episodes = 150,000 transitions);
 (c') hersd at 1 thread with ``precision=bf16`` (the updates' hidden layers in bfloat16), its
     ratio to fp32 per cycle and per update (update = sampling a minibatch + one learner update),
-    on a CPU with bf16 instructions (skipped elsewhere: hersd refuses bf16 there); the bf16 and
-    the 1-thread fp32 runs alternate their cycles in one process;
+    on a CPU with bf16 instructions (skipped elsewhere: hersd refuses bf16 there); and with
+    ``update=fast`` (fp32, the networks' passes written by hand: hersd/engine/learners/fast.py), its ratios
+    to both floors and to the default (autograd) update per cycle and per update; the bf16, fast and
+    1-thread default runs alternate their cycles in one process;
 (d) stable-baselines3 2.9.2 DDPG + HerReplayBuffer configured the same (1 thread), with an
     empty buffer and with 150,000 stored transitions (its sampler's cost grows with the
     buffer); skipped if not installed (``pip install stable-baselines3==2.9.2``).
@@ -43,6 +45,8 @@ from hersd.engine.run_state import RunState
 from hersd.engine.train import EpochStats, collect, update
 
 EPISODES_PER_CYCLE, HORIZON, BATCHES = 2, 50, 40
+# hersd's 1-thread paths: name -> its overrides ("fp32": the default, autograd update)
+PATHS = {"fp32": ["precision=fp32"], "fast": ["update=fast"], "bf16": ["precision=bf16"]}
 STEPS_PER_CYCLE = EPISODES_PER_CYCLE * HORIZON
 FILL_EPISODES = 30 * 50 * EPISODES_PER_CYCLE  # what 30 paper epochs store
 
@@ -127,13 +131,13 @@ def plain_update_seconds(in_dim: int, action_dim: int, cycles: int) -> float:
 # --------------------------------------------------------------------------- (c) hersd
 def hersd_seconds(threads: int, fill_episodes: int, cycles: int,
                   precisions: tuple[str, ...] = ("fp32",)) -> dict[str, tuple[float, float]]:
-    """hersd's collect + update at ``threads`` intra-op threads, one run per precision, the buffer holding at
-    least ``fill_episodes`` episodes (copies of real ones: sampling cost depends on the count only); the
-    runs' cycles alternate, so a load that comes and goes weighs on each alike. Precision -> (seconds per
-    cycle, seconds per update, its minibatch's sampling included)."""
+    """hersd's collect + update at ``threads`` intra-op threads, one run per path of :data:`PATHS` named in
+    ``precisions``, the buffer holding at least ``fill_episodes`` episodes (copies of real ones: sampling cost
+    depends on the count only); the runs' cycles alternate, so a load that comes and goes weighs on each alike.
+    Path -> (seconds per cycle, seconds per update, its minibatch's sampling included)."""
     torch.set_num_threads(threads)
     states = {precision: RunState(compose_train(["task=push", "quiet=true", f"threads={threads}",
-                                                 f"precision={precision}"])) for precision in precisions}
+                                                 *PATHS[precision]])) for precision in precisions}
     for state in states.values():
         stats = EpochStats(1, 0.8)
         for _ in range(2):  # warm-up, and episodes to copy
@@ -214,7 +218,7 @@ def main() -> None:
     state.close()
     ideal = physics + BATCHES * flops / rate
     practical = physics + plain_update_seconds(in_dim, spec.action_dim, args.cycles)
-    one_thread = hersd_seconds(1, 0, args.cycles, ("fp32", "bf16") if cpu_has_bf16() else ("fp32",))
+    one_thread = hersd_seconds(1, 0, args.cycles, ("fp32", "fast", "bf16") if cpu_has_bf16() else ("fp32", "fast"))
     hersd = {(threads, fill): hersd_seconds(threads, fill, args.cycles)["fp32"][0]
              for threads in sorted({1, cores}) for fill in (0, FILL_EPISODES) if (threads, fill) != (1, 0)}
     hersd[(1, 0)] = one_thread["fp32"][0]
@@ -229,6 +233,11 @@ def main() -> None:
     print(f"(c) hersd, 1 thread       {one:7.3f} s/cycle -> {one / practical:.2f}x the practical floor, "
           f"{one / ideal:.2f}x the idealised one")
     print(f"    hersd, 1 thread, 30-epoch buffer {hersd[(1, FILL_EPISODES)]:7.3f} s/cycle")
+    (fast_cycle, fast_update), fp32_update = one_thread["fast"], one_thread["fp32"][1]
+    print(f"    hersd, 1 thread, update=fast {fast_cycle:7.3f} s/cycle -> {fast_cycle / practical:.2f}x the practical "
+          f"floor, {fast_cycle / ideal:.2f}x the idealised one; {one / fast_cycle:.2f}x faster than autograd per "
+          f"cycle; per update {fast_update * 1e3:.2f} ms against {fp32_update * 1e3:.2f} ms, "
+          f"{fp32_update / fast_update:.2f}x faster than autograd")
     if "bf16" not in one_thread:
         print("    hersd, 1 thread, bf16     skipped: this CPU has no bf16 instructions")
     else:

@@ -26,6 +26,8 @@ from hersd.contract.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("fp32", "bf16")
+UPDATES = ("autograd", "fast")
+FAST_UPDATE_LEARNERS = ("ddpg", "td3")  # the learners with a hand-written update (hersd/engine/learners/fast.py)
 
 # Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
 # The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
@@ -334,6 +336,10 @@ class TrainConfig:
     # The updates' matrix products: fp32 | bf16 (hidden layers in bfloat16, all else float32; docs/LEARNERS.md,
     # "Precision"; a CPU without bf16 instructions refuses it). Part of the run's identity (fp32 adds nothing).
     precision: str = "fp32"
+    # The updates' passes: autograd | fast (forward and backward written by hand, fp32, ddpg and td3; other sums'
+    # order than autograd's, so not bit-identical to it; docs/LEARNERS.md, "The fast update"). Part of the
+    # run's identity (autograd adds nothing).
+    update: str = "autograd"
     # Treat denormal floats (|x| < 1.2e-38) as zero in the run's torch work (updates, acting, bias evaluation,
     # animations; every intra-op thread; the physics stays IEEE), as the reference's TensorFlow does for its
     # kernels (hersd/engine/denormals.py). Adam's moments of units whose gradient died decay through the denormal
@@ -355,6 +361,12 @@ class TrainConfig:
         _check(self.precision in PRECISIONS, f"precision must be fp32 or bf16, got {self.precision!r}")
         self.task.resolve()
         self.learner = learner_from_config(self.learner)
+        _check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
+        _check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
+               f"update=fast: learner {self.learner.name} has no fast update (ddpg and td3 have one); "
+               "use update=autograd")
+        _check(self.update == "autograd" or self.precision == "fp32",
+               "update=fast is a float32 path: use it with precision=fp32")
         if isinstance(self.schedule, Schedule):
             self.schedule = settle(self.schedule, self.epochs)
         else:

@@ -42,7 +42,8 @@ NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_check
               "flush_denormal", "render_every", "bias")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
-HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0, "precision": "fp32"}
+HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0, "precision": "fp32",
+                                 "update": "autograd"}
 
 
 class RunLockedError(RuntimeError):

@@ -20,6 +20,7 @@ from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.learners import GoalConditionedLearner, learner_class
+from hersd.engine.learners.fast import fast_learner_class
 from hersd.engine.replay.mep import EpisodePrioritizer
 from hersd.engine.replay.buffer import EpisodeBuffer
 from hersd.engine.resources import available_memory_bytes
@@ -128,8 +129,10 @@ def discounting(cfg: TrainConfig, spec: EnvSpec) -> tuple[float, tuple[float, fl
 def make_agent(cfg: TrainConfig, spec: EnvSpec, gamma: float, q_range: tuple[float, float],
                device: torch.device) -> GoalConditionedLearner:
     """The learner of ``cfg.learner.name``: a :class:`GoalConditionedLearner` (act, update, update_targets, ...),
-    built by its class (hersd/engine/learners/), which decides whether its target is clipped to ``q_range``."""
-    return learner_class(cfg.learner.name).build(cfg, spec, gamma, q_range, device)
+    built by its class (hersd/engine/learners/), which decides whether its target is clipped to ``q_range``; with
+    ``update=fast`` its hand-written update's subclass (hersd/engine/learners/fast.py)."""
+    cls = learner_class(cfg.learner.name)
+    return (fast_learner_class(cls) if cfg.update == "fast" else cls).build(cfg, spec, gamma, q_range, device)
 
 
 def env_bytes(env: Any) -> int:

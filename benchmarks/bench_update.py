@@ -1,0 +1,65 @@
+"""update=fast against the default (autograd) update: the CPU time of one learner update, DDPG and TD3.
+
+CPU seconds (process time: what a loaded machine's time slicing leaves out) of one update at FetchPush's
+sizes and the paper's settings (3 x 256 networks, batches of 256, one fused Adam), 1 thread, on random
+batches, the two updates alternating in rounds of 40 updates (one cycle's) after a warm-up round; the
+learner's update alone, without the minibatch's sampling (``bench_cycle.py`` times both, and the cycle).
+
+Usage: python benchmarks/bench_update.py [--rounds 8] (under a minute; docs/LEARNERS.md, "The fast update").
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig
+from hersd.engine.envs.make import EnvSpec
+from hersd.engine.learners import learner_class
+from hersd.engine.learners.fast import fast_learner_class
+
+from bench_precision import ACTION, GOAL, OBS, UPDATES, random_batch  # FetchPush's sizes, one cycle's updates
+
+
+def update_cpu_seconds(name: str, rounds: int) -> dict[str, list[float]]:
+    """Update ("autograd", "fast") -> CPU seconds per update of learner ``name`` in each round."""
+    torch.set_num_threads(1)
+    spec = EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=1.0,
+                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
+    cfg = TrainConfig(ddpg=DDPGConfig(), learner=LearnerConfig(name=name))
+    rng = np.random.default_rng(0)
+    batches = [random_batch(rng) for _ in range(UPDATES)]
+    cls = learner_class(name)
+    learners = {"autograd": cls, "fast": fast_learner_class(cls)}
+    for update, learner in learners.items():
+        torch.manual_seed(0)
+        learners[update] = learner.build(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))
+    seconds: dict[str, list[float]] = {update: [] for update in learners}
+    for round_ in range(rounds + 1):
+        for update, learner in learners.items():
+            tic = time.process_time()
+            for batch in batches:
+                learner.update(batch)
+            if round_:  # round 0 warms up
+                seconds[update].append((time.process_time() - tic) / UPDATES)
+    return seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=8)
+    args = parser.parse_args()
+    for name in ("ddpg", "td3"):
+        seconds = update_cpu_seconds(name, args.rounds)
+        autograd, fast = (np.array(seconds[update]) for update in ("autograd", "fast"))
+        print(f"{name.upper()} update CPU time (median of {args.rounds} rounds of {UPDATES}): autograd "
+              f"{np.median(autograd) * 1e3:.2f} ms, fast {np.median(fast) * 1e3:.2f} ms -> fast "
+              f"{np.median(autograd / fast):.2f}x faster (round by round: {np.min(autograd / fast):.2f}-"
+              f"{np.max(autograd / fast):.2f}x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,179 @@
+"""update=fast (hersd/engine/learners/fast.py, docs/LEARNERS.md "The fast update"): DDPG's and TD3's update with the
+networks' passes written by hand. Its gradients are autograd's to 1e-5 relative and its steps follow the default
+update's within rounding; it is another run's identity, the default (autograd) every earlier run's; SAC, bf16 and
+unknown values are refused in one line."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import torch
+from helpers import TINY, metrics
+
+from hersd.contract.compose import compose_train
+from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig, config_record
+from hersd.contract.errors import ConfigError
+from hersd.engine.envs.make import EnvSpec
+from hersd.engine.learners import learner_class
+from hersd.engine.learners.fast import FastDDPG, FastTD3, fast_learner_class
+from hersd.engine.replay.buffer import TransitionBatch
+from hersd.engine.run_state import make_agent
+from hersd.contract.runstore import config_hash, run_identity
+from hersd.engine.train import train
+
+LEARNERS = ("ddpg", "td3")
+# (obs, goal, action, hidden layers, units, batch): FetchPush's sizes at the paper's settings, and a tiny net
+SIZES = {"push": (25, 3, 4, 3, 256, 256), "tiny": (5, 3, 2, 2, 16, 16)}
+
+
+def learner_pair(name: str, size: str):
+    """The autograd learner ``name`` and its fast twin, both from torch seed 0 (the same networks), their
+    normalisers fed the same 1000 random rows."""
+    obs, goal, action, layers, units, _ = SIZES[size]
+    spec = EnvSpec(obs_dim=obs, goal_dim=goal, action_dim=action, horizon=50, max_action=1.0,
+                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
+    cfg = TrainConfig(ddpg=DDPGConfig(hidden_layers=layers, hidden_units=units), learner=LearnerConfig(name=name))
+    pair = []
+    for cls in (learner_class(name), fast_learner_class(learner_class(name))):
+        torch.manual_seed(0)
+        agent = cls.build(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))
+        rng = np.random.default_rng(0)
+        agent.update_normalizers(rng.normal(size=(1000, obs)), rng.normal(size=(1000, goal)))
+        pair.append(agent)
+    return pair
+
+
+def random_batch(size: str, seed: int) -> TransitionBatch:
+    """A batch of ``size``'s shape: random states, goals and actions, rewards -1 or 0, 80 % relabelled."""
+    obs, goal, action, _, _, rows = SIZES[size]
+    rng = np.random.default_rng(seed)
+    f32 = np.float32
+    return TransitionBatch(obs=rng.normal(size=(rows, obs)).astype(f32), next_obs=rng.normal(size=(rows, obs)).astype(f32),
+                           goal=rng.normal(size=(rows, goal)).astype(f32),
+                           action=rng.uniform(-1, 1, size=(rows, action)).astype(f32),
+                           reward=-rng.integers(0, 2, rows).astype(f32), relabelled=rng.random(rows) < 0.8,
+                           real_success=np.zeros(rows, bool), episode=np.zeros(rows, int), t=np.zeros(rows, int))
+
+
+def autograd_gradients(agent, data: TransitionBatch) -> tuple[float, float]:
+    """The autograd update's losses and, in each parameter's ``.grad``, its gradient (``DDPG.update`` less its step)."""
+    inputs = agent._inputs(data.obs, data.goal)
+    action = agent.tensor(data.action) / agent.max_action
+    target = agent.target_q(agent._inputs(data.next_obs, data.goal), agent.tensor(data.reward).unsqueeze(1))
+    critic_loss, _ = agent.critic_loss(torch.cat([inputs, action], dim=1), target)
+    actor_loss = agent.actor_loss(inputs)
+    agent.optimizer.zero_grad(set_to_none=True)
+    (critic_loss + actor_loss).backward()
+    return critic_loss.item(), actor_loss.item()
+
+
+def parameters(agent) -> dict[str, torch.Tensor]:
+    """Every online network's parameters by name (``critic.0.weight``, ...)."""
+    return {f"{net}.{name}": p for net in ("actor", *agent.CRITICS) for name, p in getattr(agent, net).named_parameters()}
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", LEARNERS)
+def test_its_gradients_are_autogradss_to_1e_5_relative(name, size, monkeypatch):
+    """Same networks and batch: each parameter's gradient of the critic loss (critics) and of the actor loss
+    (actor) differs from autograd's by at most 1e-5 of that gradient's largest element; the losses too."""
+    reference, fast = learner_pair(name, size)
+    data = random_batch(size, 1)
+    torch.manual_seed(5)  # TD3's target noise: both draw it alike
+    critic_loss, actor_loss = autograd_gradients(reference, data)
+    monkeypatch.setattr(fast.optimizer, "step", lambda: None)
+    monkeypatch.setattr(fast, "_direct_adam", False)  # the step is Adam.step, here none: the gradients stay
+    torch.manual_seed(5)
+    stats = fast.update(data)
+    assert stats.critic_loss == pytest.approx(critic_loss, rel=1e-5)
+    assert stats.actor_loss == pytest.approx(actor_loss, rel=1e-5)
+    fast_parameters = parameters(fast)
+    for key, p in parameters(reference).items():
+        error = (fast_parameters[key].grad - p.grad).abs().max().item()
+        assert error <= 1e-5 * p.grad.abs().max().item(), (key, error)
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", LEARNERS)
+def test_its_updates_follow_the_autograd_updates_within_rounding(name, size):
+    """Three full updates (TD3: the actor steps on the first and third): every parameter within 1e-6 of the
+    default update's (an Adam step moves a weight by about lr = 1e-3), and the same stats within rounding."""
+    reference, fast = learner_pair(name, size)
+    for seed in range(3):
+        data = random_batch(size, seed)
+        torch.manual_seed(seed)
+        expected = reference.update(data)
+        torch.manual_seed(seed)
+        stats = fast.update(data)
+        numbers = [(got, want) for got, want in zip(stats, expected) if want is not None]  # no entropy: not SAC
+        assert np.allclose(*zip(*numbers), rtol=1e-5, atol=1e-6), (stats, expected)
+        fast_parameters = parameters(fast)
+        for key, p in parameters(reference).items():
+            assert torch.allclose(fast_parameters[key], p, rtol=0, atol=1e-6), key
+    assert fast.optimizer.state_dict()["state"].keys() == reference.optimizer.state_dict()["state"].keys()
+
+
+def test_td3s_actor_stands_still_between_its_steps():
+    reference, fast = learner_pair("td3", "tiny")
+    fast.update(random_batch("tiny", 0))
+    actor = {key: p.clone() for key, p in parameters(fast).items() if key.startswith("actor.")}
+    steps = [fast.optimizer.state[p]["step"].item() for p in fast.actor.parameters()]
+    fast.update(random_batch("tiny", 1))  # policy_delay 2: the critics step, the actor not
+    assert all(torch.equal(p, actor[key]) for key, p in parameters(fast).items() if key.startswith("actor."))
+    assert [fast.optimizer.state[p]["step"].item() for p in fast.actor.parameters()] == steps
+    assert fast.update_count == 2
+
+
+@pytest.mark.parametrize("name", LEARNERS)
+def test_checkpoints_load_across_the_two_updates(name):
+    """The fast learner's checkpoint is the autograd one's (same parts, same optimiser state), either way."""
+    reference, fast = learner_pair(name, "tiny")
+    fast.update(random_batch("tiny", 0))
+    reference.load_state_dict(copy.deepcopy(fast.state_dict()))
+    assert all(torch.equal(p, q) for p, q in zip(parameters(reference).values(), parameters(fast).values()))
+    reference.update(random_batch("tiny", 1))
+    fast.load_state_dict(copy.deepcopy(reference.state_dict()))
+    fast.update(random_batch("tiny", 2))  # the loaded Adam state is the one it steps
+    assert all(fast.optimizer.state[p]["step"].item() == 3 for p in fast.critic.parameters())
+
+
+def test_the_run_builds_the_fast_learner_and_nothing_else_changes():
+    cfg = compose_train(["task=reach", "update=fast"])
+    spec = EnvSpec(obs_dim=10, goal_dim=3, action_dim=4, horizon=50, max_action=1.0, distance_threshold=0.05,
+                   reward_range=(-1.0, 0.0))
+    assert type(make_agent(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))) is FastDDPG
+    cfg = compose_train(["task=reach", "update=fast", "learner=td3"])
+    assert type(make_agent(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))) is FastTD3
+    cfg = compose_train(["task=reach"])
+    assert type(make_agent(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))) is learner_class("ddpg")
+
+
+def test_fast_is_another_runs_identity_and_autograd_that_of_runs_made_before_the_setting():
+    default = compose_train(["task=push"])
+    assert config_hash(default) == "64e236fe"  # tests/test_configs.py's golden hash
+    assert config_hash(compose_train(["task=push", "update=fast"])) != config_hash(default)
+    before = config_record(default)
+    del before["update"]
+    assert run_identity(before) == run_identity(default) and "update" not in run_identity(default)
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["learner=sac"], "update=fast: learner sac has no fast update .*use update=autograd"),
+    (["precision=bf16"], "update=fast is a float32 path: use it with precision=fp32"),
+])
+def test_what_has_no_fast_update_is_refused_in_one_line(overrides, message):
+    with pytest.raises(ConfigError, match=message):
+        compose_train(["task=push", "update=fast", *overrides])
+
+
+def test_an_unknown_update_is_refused():
+    with pytest.raises(ConfigError, match="update must be autograd or fast, got 'quick'"):
+        compose_train(["task=push", "update=quick"])
+
+
+def test_a_tiny_fast_run_trains_and_logs(tmp_path):
+    log = train(compose_train([*TINY, "update=fast", "epochs=2", "quiet=true", "threads=1",
+                               f"results_dir={tmp_path}"]))
+    assert len(metrics(log)) == 2 and np.isfinite(metrics(log)["critic_loss"]).all()
