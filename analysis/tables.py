@@ -140,13 +140,13 @@ def html_table(table: pd.DataFrame, float_format: str = FLOAT_FORMAT, epochs: in
                titles: Mapping[str, pd.Series] | None = None) -> str:
     """An HTML ``<table class="data">`` of ``table``: headers by :func:`column_header`, numbers right-aligned
     at their column's decimals (:data:`COLUMNS`, else ``float_format``), text columns (e.g. config labels)
-    left-aligned (``class=text``) with their hyphenated words kept whole (``<span class=word>``), missing values
+    left-aligned (``class=text``), hyphenated words of headers and text cells kept whole (``<span class=word>``), missing values
     empty. ``titles``: per column, a Series (aligned with the
     rows) of tooltips for its cells, e.g. a run's whole path."""
     is_text = [not pd.api.types.is_numeric_dtype(table[name]) or pd.api.types.is_bool_dtype(table[name])
                for name in table.columns]
     attributes = [" class=text" if text else "" for text in is_text]
-    head = "".join(f"<th{attribute}>{html.escape(column_header(name, epochs, columns))}</th>"
+    head = "".join(f"<th{attribute}>{_unbroken(column_header(name, epochs, columns))}</th>"
                    for name, attribute in zip(table.columns, attributes))
     formats = [(columns[name].number if name in columns else None) or float_format for name in table.columns]
     tips = [None if titles is None or name not in titles else list(titles[name]) for name in table.columns]

@@ -146,6 +146,7 @@ def test_a_class_given_as_a_learner_choice_is_one_line_saying_what_to_type(user_
 
 def test_a_setting_the_learner_lacks_is_one_line(user_late):
     from hersd.contract.config import TrainConfig
+    from hersd.contract.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"^learner\.td3late\.start is not a setting; its settings: policy_noise, "
                                           r"noise_clip, policy_delay, actor_start$"):
