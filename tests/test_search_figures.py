@@ -37,11 +37,15 @@ def newcomer_steps(tmp_path, monkeypatch):
     sys.modules.pop(MODULE, None)
 
 
-def _search(storage: str, name: str, draw) -> None:
-    """A study of six trials, ``draw(trial)`` drawing each one's settings -> its value; trial 3 fails, trial 4 is
-    pruned at its first report."""
+def _search(storage: str, name: str, draw, first: tuple[dict, ...] = ()) -> None:
+    """A study of six trials, ``draw(trial)`` drawing each one's settings -> its value (a seeded sampler; the
+    first trials take the ``first`` parameters, e.g. one of each kind); trial 3 fails, trial 4 is pruned at its
+    first report."""
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study = optuna.create_study(study_name=name, storage=storage, direction="maximize")
+    study = optuna.create_study(study_name=name, storage=storage, direction="maximize",
+                                sampler=optuna.samplers.RandomSampler(seed=0))
+    for params in first:
+        study.enqueue_trial(params)
 
     def objective(trial: optuna.Trial) -> float:
         value = draw(trial)
@@ -101,7 +105,8 @@ def test_a_search_of_decays_and_other_settings_draws_the_plane_above_a_panel_for
         value += trial.suggest_float("beta2", -2, 2) if kind == "exponential" else 0.0
         return value + trial.suggest_float("lambda_h", 0.25, 1.0)
 
-    _search(f"sqlite:///{tmp_path / 'mixed.db'}", "mixed", draw)
+    _search(f"sqlite:///{tmp_path / 'mixed.db'}", "mixed", draw,
+            first=({"kind": "exponential"}, {"kind": "linear"}, {"kind": "constant"}))  # every kind completes
     _search(f"sqlite:///{tmp_path / 'mixed.db'}", "decays", lambda trial: trial.suggest_float("beta1", 0, 1)
             + trial.suggest_float("beta2", -2, 2))
     storage = open_study_storage(tmp_path / "mixed.db").storage
