@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import numpy as np
 import torch
@@ -28,6 +29,8 @@ from hersd.engine.replay.buffer import TransitionBatch
 
 INPUTS, BATCH, OFFSETS = 32, 256, (0.0, -15.0)
 OBS, GOAL, ACTION, UPDATES = 25, 3, 4, 40  # FetchPush's sizes; updates per round (one cycle's)
+PUSH_SPEC = EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=1.0,
+                    distance_threshold=0.05, reward_range=(-1.0, 0.0))
 
 
 def q_errors(offset: float) -> dict[str, torch.Tensor]:
@@ -57,24 +60,27 @@ def random_batch(rng: np.random.Generator) -> TransitionBatch:
                            real_success=zeros.astype(bool), episode=zeros, t=zeros)
 
 
-def update_cpu_seconds(rounds: int) -> dict[str, list[float]]:
-    """Precision -> CPU seconds per update of each round (the precisions alternating, after a warm-up)."""
+def seconds_per_update(learners: dict[str, Any], rounds: int) -> dict[str, list[float]]:
+    """Label -> CPU seconds per update of that learner in each of ``rounds`` rounds of UPDATES random
+    batches (1 thread; the learners alternating round by round, after a warm-up round)."""
     torch.set_num_threads(1)
-    spec = EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=1.0,
-                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
     rng = np.random.default_rng(0)
     batches = [random_batch(rng) for _ in range(UPDATES)]
-    learners = {precision: DDPG(DDPGConfig(), spec, 0.98, (-50.0, 0.0), precision=precision)
-                for precision in ("fp32", "bf16")}
-    seconds: dict[str, list[float]] = {precision: [] for precision in learners}
+    seconds: dict[str, list[float]] = {label: [] for label in learners}
     for round_ in range(rounds + 1):
-        for precision, learner in learners.items():
+        for label, learner in learners.items():
             tic = time.process_time()
             for batch in batches:
                 learner.update(batch)
             if round_:  # round 0 warms up
-                seconds[precision].append((time.process_time() - tic) / UPDATES)
+                seconds[label].append((time.process_time() - tic) / UPDATES)
     return seconds
+
+
+def update_cpu_seconds(rounds: int) -> dict[str, list[float]]:
+    """Precision -> CPU seconds per update of each round (the precisions alternating, after a warm-up)."""
+    return seconds_per_update({precision: DDPG(DDPGConfig(), PUSH_SPEC, 0.98, (-50.0, 0.0), precision=precision)
+                               for precision in ("fp32", "bf16")}, rounds)
 
 
 def main() -> None:

@@ -11,41 +11,26 @@ Usage: python benchmarks/bench_update.py [--rounds 8] (under a minute; docs/LEAR
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 import torch
 
 from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig
-from hersd.engine.envs.make import EnvSpec
 from hersd.engine.learners import learner_class
 from hersd.engine.learners.fast import fast_learner_class
 
-from bench_precision import ACTION, GOAL, OBS, UPDATES, random_batch  # FetchPush's sizes, one cycle's updates
+from bench_precision import PUSH_SPEC, UPDATES, seconds_per_update  # FetchPush's sizes, one cycle's updates
 
 
 def update_cpu_seconds(name: str, rounds: int) -> dict[str, list[float]]:
     """Update ("autograd", "fast") -> CPU seconds per update of learner ``name`` in each round."""
-    torch.set_num_threads(1)
-    spec = EnvSpec(obs_dim=OBS, goal_dim=GOAL, action_dim=ACTION, horizon=50, max_action=1.0,
-                   distance_threshold=0.05, reward_range=(-1.0, 0.0))
     cfg = TrainConfig(ddpg=DDPGConfig(), learner=LearnerConfig(name=name))
-    rng = np.random.default_rng(0)
-    batches = [random_batch(rng) for _ in range(UPDATES)]
     cls = learner_class(name)
-    learners = {"autograd": cls, "fast": fast_learner_class(cls)}
-    for update, learner in learners.items():
+    learners = {}
+    for update, learner in {"autograd": cls, "fast": fast_learner_class(cls)}.items():
         torch.manual_seed(0)
-        learners[update] = learner.build(cfg, spec, 0.98, (-50.0, 0.0), torch.device("cpu"))
-    seconds: dict[str, list[float]] = {update: [] for update in learners}
-    for round_ in range(rounds + 1):
-        for update, learner in learners.items():
-            tic = time.process_time()
-            for batch in batches:
-                learner.update(batch)
-            if round_:  # round 0 warms up
-                seconds[update].append((time.process_time() - tic) / UPDATES)
-    return seconds
+        learners[update] = learner.build(cfg, PUSH_SPEC, 0.98, (-50.0, 0.0), torch.device("cpu"))
+    return seconds_per_update(learners, rounds)
 
 
 def main() -> None:

@@ -10,11 +10,11 @@ name is found there, then among the entry points of the group ``hersd.learners``
 from __future__ import annotations
 
 import dataclasses
-import importlib
-from importlib.metadata import entry_points
 from typing import Any
 
 from hersd.contract.errors import ConfigError
+from hersd.contract.plugins import class_at, entry_point_class
+from hersd.contract.plugins import entry_point_names as declared_names
 
 LEARNERS: dict[str, type] = {}  # NAME -> learner class, filled as the classes are defined
 ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
@@ -24,17 +24,11 @@ TARGET_KEY = "learner._target_"  # a class by its path: learner._target_=<module
 def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     """The learner class a ``learner=`` name or class path selects; ConfigError (one line, listing ``known``
     and the registered names) if none, or if it declares SETTINGS that are not a dataclass."""
-    cls = LEARNERS.get(name)
-    if cls is None and (found := entry_points(group=ENTRY_POINT_GROUP, name=name)):
-        cls = next(iter(found)).load()
+    cls = LEARNERS.get(name) or entry_point_class(ENTRY_POINT_GROUP, name)
     if cls is None and "." in name:
-        module, _, class_name = name.rpartition(".")
-        try:
-            cls = getattr(importlib.import_module(module), class_name)
-        except (ImportError, AttributeError) as err:
-            raise ConfigError(f"learner class {name} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+        cls = class_at(name, "learner")
     if cls is None:
-        names = sorted({*known, *LEARNERS, *(point.name for point in entry_points(group=ENTRY_POINT_GROUP))})
+        names = sorted({*known, *LEARNERS, *entry_point_names()})
         raise ConfigError(f"learner={name!r} is unknown; choose one of: {', '.join(names)}, "
                           "or a class: learner._target_=<module>.<Class>")
     settings = getattr(cls, "SETTINGS", None)
@@ -48,7 +42,7 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
 def entry_point_names() -> list[str]:
     """The names other packages' learners are declared under (entry points of :data:`ENTRY_POINT_GROUP`), sorted:
     each a ``learner=<name>`` choice beside conf/learner/'s (:func:`hersd.compose.register_train_schema`)."""
-    return sorted({point.name for point in entry_points(group=ENTRY_POINT_GROUP)})
+    return declared_names(ENTRY_POINT_GROUP)
 
 
 def typed_instead(choice: str) -> str | None:

@@ -4,11 +4,10 @@ import path (Hydra's ``_target_`` convention: ``schedule._target_=my_pkg.schedul
 
 from __future__ import annotations
 
-import importlib
-from importlib.metadata import entry_points
 from typing import Any, Mapping
 
 from hersd.contract.errors import ConfigError
+from hersd.contract.plugins import class_at, entry_point_class, entry_point_names
 from hersd.contract.schedules.base import Schedule, check_rates
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.cosine import Cosine
@@ -26,26 +25,19 @@ TARGET_KEY = "_target_"
 
 def registered(kind: str) -> type[Schedule] | None:
     """The class registered under ``kind`` (the package's or an entry point's), else None."""
-    if kind in SCHEDULES:
-        return SCHEDULES[kind]
-    found = entry_points(group=ENTRY_POINT_GROUP, name=kind)
-    return next(iter(found)).load() if found else None
+    return SCHEDULES.get(kind) or entry_point_class(ENTRY_POINT_GROUP, kind)
 
 
 def known_kinds() -> list[str]:
     """Every registered kind: the package's, then the entry points' (sorted)."""
-    return [*SCHEDULES, *sorted({point.name for point in entry_points(group=ENTRY_POINT_GROUP)} - set(SCHEDULES))]
+    return [*SCHEDULES, *(name for name in entry_point_names(ENTRY_POINT_GROUP) if name not in SCHEDULES)]
 
 
 def schedule_class(kind: str) -> type[Schedule]:
     """The class of a kind name or of an import path ``package.module.Class`` (ConfigError, one line, if none)."""
     cls = registered(kind)
     if cls is None and "." in kind:
-        module, _, name = kind.rpartition(".")
-        try:
-            cls = getattr(importlib.import_module(module), name)
-        except (ImportError, AttributeError) as err:
-            raise ConfigError(f"schedule class {kind} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+        cls = class_at(kind, "schedule")
     if cls is None:
         raise ConfigError(f"schedule.kind={kind!r} is unknown; choose one of: {', '.join(known_kinds())}, "
                           f"or a class: schedule.{TARGET_KEY}=<module>.<Class>")
