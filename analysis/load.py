@@ -19,6 +19,7 @@ own rule) are told apart by the settings that differ.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from importlib import resources
 from dataclasses import dataclass, field
@@ -56,6 +57,9 @@ RUN_COLUMNS = (
     "seed",
     "total_epochs",   # K: config.epochs
     "mu_eps",         # the exact mean rate over the run's K (eq. 10 for eq. 9's kinds); the mean logged rate if adaptive
+    "variant",        # the settings it runs at other than their earlier value (variant), e.g. "precision=bf16"; "" if none
+    "defaults_id",    # 8 hex digits of its configuration with those settings at their earlier value (defaults_id):
+                      # a variant's runs share it with the runs of the configuration they vary
     "epochs_done",    # completed epochs in the log
     "complete",       # the log says the run finished
     "damaged",        # the file has no valid end (cut short, or an earlier-format log of a killed or running writer)
@@ -110,6 +114,13 @@ def variant(settings: dict[str, Any]) -> list[str]:
     value, as ``key=value``, e.g. ``["precision=bf16"]``; ``settings`` as :func:`configuration` gives them."""
     return [f"{key}={settings[key]}" for key, earlier in HASHED_UNLESS.items()
             if "." not in key and settings.get(key, earlier) != earlier]
+
+
+def defaults_id(settings: dict[str, Any]) -> str:
+    """8 hex digits naming a run's configuration (``settings`` as :func:`configuration` gives them) with the
+    settings :func:`variant` names at their earlier value: the same for ``HER precision=bf16`` as for ``HER``."""
+    defaults = {**settings, **{key: earlier for key, earlier in HASHED_UNLESS.items() if "." not in key}}
+    return hashlib.sha256(json.dumps(defaults, sort_keys=True, default=str).encode()).hexdigest()[:8]
 
 
 def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg",
@@ -364,8 +375,8 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     # differs. Across tasks a label (K included) may differ in budget per epoch (cycles): tasks are strata.
     groups = [(row["task"], label) for row, label in zip(rows, labels)]
     labels = _distinguish(labels, [log.settings for log in logs], groups)
-    for row, label in zip(rows, labels):
-        row["config"] = label
+    for row, label, log, varied in zip(rows, labels, logs, variants):
+        row.update(config=label, variant=" ".join(varied), defaults_id=defaults_id(log.settings))
     order = sorted({row["config"]: row for row in rows}.values(), key=lambda r: (_config_order(r), r["config"]))
     runs = pd.DataFrame.from_records(rows)
     runs.insert(0, "run", range(len(runs)))

@@ -57,8 +57,10 @@ PERMUTATION_BATCH = 64  # splits evaluated at once: bounds memory for a large gr
 # The decay against the constant rate at the same mean rate (equal_mu_tests): mu_eps equal within this tolerance.
 EQUAL_MU_TOLERANCE = 1e-9
 EQUAL_MU_OUTCOMES = [*RUN_OUTCOME_COLUMNS, RUN_AUC]
-EQUAL_MU_COLUMNS = ["task", "config", "versus", "mu_eps", "seeds", "versus_seeds", "outcome", "config_mean",
-                    "versus_mean", "p_config_better", "p_versus_better", "splits", "smallest_p"]
+TWO_WAY_COLUMNS = ["seeds", "versus_seeds", "outcome", "config_mean", "versus_mean", "p_config_better",
+                   "p_versus_better", "splits", "smallest_p"]  # two_way_tests' columns after the pair's
+EQUAL_MU_COLUMNS = ["task", "config", "versus", "mu_eps", *TWO_WAY_COLUMNS]
+VARIANT_COLUMNS = ["task", "config", "versus", "variant", *TWO_WAY_COLUMNS]
 PERMUTATION_COLUMNS = ["task", "config", "versus", "seeds", "versus_seeds",
                        *(f"p_{outcome}" for outcome in RUN_OUTCOME_COLUMNS)]
 
@@ -443,25 +445,56 @@ def _outcome_grids(curves: pd.DataFrame) -> pd.DataFrame:
     return grids.assign(**{column: 1.0 for column in RUN_OUTCOME_COLUMNS[1:]})
 
 
+def variant_pairs(runs: pd.DataFrame) -> pd.DataFrame:
+    """Every configuration run at a variant (settings added after the first runs, at other than their earlier
+    value: ``precision=bf16``, ``update=fast``; :func:`analysis.load.variant`) paired with the same configuration
+    at the defaults (the same ``defaults_id``), both with at least two complete seeds. Columns task, config,
+    versus (the configuration at the defaults), variant; in configuration order."""
+    complete = runs[runs["complete"]]
+    configs = complete.groupby(GROUP, observed=True).agg(variant=("variant", "first"),
+                                                          defaults_id=("defaults_id", "first"),
+                                                          seeds=("run", "size")).reset_index()
+    configs = configs[configs["seeds"] >= 2]
+    at_defaults = configs["variant"] == ""
+    pairs = configs[~at_defaults].merge(configs[at_defaults], on=["task", "defaults_id"], suffixes=("", "_versus"))
+    pairs = pairs.rename(columns={"config_versus": "versus"})[["task", "config", "versus", "variant"]]
+    ranks = {"task": task_rank, "config": _config_rank(runs), "versus": _config_rank(runs)}
+    return pairs.sort_values(list(ranks), key=lambda column: column.map(ranks[column.name])).reset_index(drop=True)
+
+
 def equal_mu_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, curves: pd.DataFrame,
                    seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
-    """Decay against constant rate at the same mu_eps (:func:`equal_mu_pairs`): one row per pair and outcome
-    (EQUAL_MU_OUTCOMES). Columns EQUAL_MU_COLUMNS: config_mean / versus_mean, each side's mean over its complete
-    seeds (exact; ``never`` counted as K + 1 epochs); p_config_better / p_versus_better, the two one-sided
-    permutation-test p-values (as :func:`permutation_tests`: difference of the means, exact up to
-    PERMUTATION_RESAMPLES splits); splits, C(seeds + versus_seeds, seeds); smallest_p, the smallest p either can
-    be: 1 / splits when exact, else 1 / (PERMUTATION_RESAMPLES + 1).
+    """Decay against constant rate at the same mu_eps (:func:`equal_mu_pairs`): :func:`two_way_tests`, columns
+    EQUAL_MU_COLUMNS."""
+    return two_way_tests(equal_mu_pairs(runs), EQUAL_MU_COLUMNS, runs, outcomes, curves, seed)
+
+
+def variant_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, curves: pd.DataFrame,
+                  seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+    """Each variant against its configuration at the defaults (:func:`variant_pairs`; e.g. ``HER precision=bf16``
+    against ``HER``): :func:`two_way_tests`, columns VARIANT_COLUMNS."""
+    return two_way_tests(variant_pairs(runs), VARIANT_COLUMNS, runs, outcomes, curves, seed)
+
+
+def two_way_tests(pairs: pd.DataFrame, columns: list[str], runs: pd.DataFrame, outcomes: pd.DataFrame,
+                  curves: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataFrame:
+    """Both one-sided permutation tests of each pair (``pairs``: task, config, versus, then what ``columns``
+    keeps of the pair before TWO_WAY_COLUMNS), one row per outcome (EQUAL_MU_OUTCOMES). config_mean /
+    versus_mean: each side's mean over its complete seeds (exact; ``never`` counted as K + 1 epochs);
+    p_config_better / p_versus_better: the two one-sided p-values (as :func:`permutation_tests`: difference of
+    the means, exact up to PERMUTATION_RESAMPLES splits); splits, C(seeds + versus_seeds, seeds); smallest_p,
+    the smallest p either can be: 1 / splits when exact, else 1 / (PERMUTATION_RESAMPLES + 1).
     """
     from scipy import stats
 
-    pairs = equal_mu_pairs(runs)
     signed = _outcomes_higher_is_better(runs, outcomes, EQUAL_MU_OUTCOMES)
     grids = _outcome_grids(curves).loc[:, EQUAL_MU_OUTCOMES]
     runs_of = runs[runs["complete"]].groupby(GROUP, observed=True)["run"].apply(list)
     sign = np.array([-1.0 if "epochs_to_" in outcome else 1.0 for outcome in EQUAL_MU_OUTCOMES])
+    pair_columns = columns[:len(columns) - len(TWO_WAY_COLUMNS)]
     rows = []
-    for pair in pairs.itertuples(index=False):
-        x, y = signed[(pair.task, pair.config)][1], signed[(pair.task, pair.versus)][1]
+    for pair in pairs[pair_columns].to_dict("records"):
+        x, y = signed[(pair["task"], pair["config"])][1], signed[(pair["task"], pair["versus"])][1]
         p_values = [stats.permutation_test((x, y), _mean_difference, permutation_type="independent", vectorized=True,
                                            alternative=alternative, n_resamples=PERMUTATION_RESAMPLES, axis=-1,
                                            rng=np.random.default_rng(seed)).pvalue
@@ -469,15 +502,14 @@ def equal_mu_tests(runs: pd.DataFrame, outcomes: pd.DataFrame, curves: pd.DataFr
         splits = math.comb(x.shape[1] + y.shape[1], x.shape[1])
         smallest = 1 / splits if splits <= PERMUTATION_RESAMPLES else 1 / (PERMUTATION_RESAMPLES + 1)
         means = [on_grid((sign[:, None] * values).mean(axis=1),
-                         values.shape[1] * grids.loc[runs_of[(pair.task, config)]].agg(common_grid).to_numpy())
-                 for config, values in ((pair.config, x), (pair.versus, y))]
+                         values.shape[1] * grids.loc[runs_of[(pair["task"], config)]].agg(common_grid).to_numpy())
+                 for config, values in ((pair["config"], x), (pair["versus"], y))]
         for index, outcome in enumerate(EQUAL_MU_OUTCOMES):
-            rows.append({"task": pair.task, "config": pair.config, "versus": pair.versus, "mu_eps": pair.mu_eps,
-                         "seeds": x.shape[1], "versus_seeds": y.shape[1], "outcome": outcome,
+            rows.append({**pair, "seeds": x.shape[1], "versus_seeds": y.shape[1], "outcome": outcome,
                          "config_mean": means[0][index], "versus_mean": means[1][index],
                          "p_config_better": p_values[0][index], "p_versus_better": p_values[1][index],
                          "splits": splits, "smallest_p": smallest})
-    return pd.DataFrame.from_records(rows, columns=EQUAL_MU_COLUMNS)
+    return pd.DataFrame.from_records(rows, columns=columns)
 
 
 def composition(epochs: pd.DataFrame) -> pd.DataFrame:
@@ -601,7 +633,8 @@ class Analysis:
     :func:`composition`; q_means: :func:`mean_q`; composition_vs_paper:
     :func:`composition_versus_paper`; window: the smoothing window in epochs; outcomes:
     :func:`run_outcomes` of every run (each run's own numbers, the run list's); tests:
-    :func:`permutation_tests` between the configurations of each task; equal_mu_tests: :func:`equal_mu_tests`.
+    :func:`permutation_tests` between the configurations of each task; equal_mu_tests: :func:`equal_mu_tests`;
+    variant_tests: :func:`variant_tests`.
     """
 
     runs: pd.DataFrame
@@ -617,6 +650,7 @@ class Analysis:
     outcomes: pd.DataFrame
     tests: pd.DataFrame
     equal_mu_tests: pd.DataFrame
+    variant_tests: pd.DataFrame
 
 
 def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = BOOTSTRAP_SEED) -> Analysis:
@@ -626,15 +660,15 @@ def analyse(runs: pd.DataFrame, epochs: pd.DataFrame, window: int, seed: int = B
 
 def analyse_curves(runs: pd.DataFrame, epochs: pd.DataFrame, window: int) -> Analysis:
     """What the figures draw (curves, medians, shares, q_means, outcomes); the statistics tables (summary,
-    aggregate, composition_vs_paper, tests, equal_mu_tests) empty until :func:`with_statistics` (the report
-    computes them while worker processes draw)."""
+    aggregate, composition_vs_paper, tests, equal_mu_tests, variant_tests) empty until :func:`with_statistics`
+    (the report computes them while worker processes draw)."""
     curves = smoothed_curves(epochs, window)
     complete_epochs = epochs[epochs["complete"]]
     empty = pd.DataFrame()
     return Analysis(runs=runs, epochs=epochs, curves=curves, medians=median_curves(curves[curves["complete"]]),
                     summary=empty, aggregate=empty, shares=composition(complete_epochs),
                     q_means=mean_q(complete_epochs), composition_vs_paper=empty, window=window,
-                    outcomes=run_outcomes(curves), tests=empty, equal_mu_tests=empty)
+                    outcomes=run_outcomes(curves), tests=empty, equal_mu_tests=empty, variant_tests=empty)
 
 
 def with_statistics(analysis: Analysis, seed: int = BOOTSTRAP_SEED) -> Analysis:
@@ -645,4 +679,5 @@ def with_statistics(analysis: Analysis, seed: int = BOOTSTRAP_SEED) -> Analysis:
                    aggregate=aggregate_table(complete_curves, runs, seed=seed),
                    composition_vs_paper=composition_versus_paper(analysis.shares, runs[runs["complete"]]),
                    tests=permutation_tests(runs, outcomes, seed=seed),
-                   equal_mu_tests=equal_mu_tests(runs, outcomes, curves, seed=seed))
+                   equal_mu_tests=equal_mu_tests(runs, outcomes, curves, seed=seed),
+                   variant_tests=variant_tests(runs, outcomes, curves, seed=seed))

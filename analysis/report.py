@@ -10,6 +10,8 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/composition_150.csv|.md  FetchPush HER's minibatch at epoch 150 beside the paper's (when run that long)
     tables/permutation_tests.csv|.md  per task, one-sided permutation tests between configurations' seeds
     tables/equal_mu_tests.csv|.md  per task, each decay against the constant rate at its mu_eps, both directions
+    tables/variant_tests.csv|.md  per task, each variant (precision=bf16, update=fast) against its configuration at
+                                 the defaults, both directions
     tables/runs.csv              the runs behind them
     tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates
     search/<study>_*             each Optuna study's beta-plane figure and best trials
@@ -112,6 +114,11 @@ TABLE_NOTES = {
                  "means, exact when the splits number at most 9999). <b>Smallest p the seeds allow</b>: 1 over the "
                  "<b>splits of the seeds</b>, C(n1 + n2, n1) (1/252 at 5 against 5; 1/10000 beyond 9999 splits, drawn "
                  "at random): no result can be more significant."),
+    "variants": ("Each configuration run at a variant (a setting added after the first runs, at other than its "
+                 "earlier value: precision=bf16, update=fast) against the same configuration at the defaults (every "
+                 "other setting equal; paired automatically): does it learn the same? The outcomes, means, p-values "
+                 "and smallest p as in the table above; a large p in both directions says the seeds do not separate "
+                 "them, not that they are equal."),
     "critic_tests": ("The critic's bias (Q minus the discounted return the policy obtains, figure above) of each "
                      "complete run, averaged over epochs 1-50 (trapezoids over its evaluated epochs), for real and "
                      "for hindsight goals: the configuration's and the versus configuration's means over runs, "
@@ -258,6 +265,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                          epochs=_common_epochs(analysis.summary, runs)),
               "<h2>Across tasks</h2>", f"<p>{TABLE_NOTES['aggregate']}</p>",
               html_table(analysis.aggregate), *_tests_html(analysis.tests), *_equal_mu_html(analysis.equal_mu_tests),
+              *_variant_html(analysis.variant_tests),
               "<h2>Figures</h2>"]
     placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
@@ -309,6 +317,14 @@ def _equal_mu_html(tests: pd.DataFrame) -> list[str]:
         return []
     return ["<h2>Decay or mean rate: each decay against the constant rate at its μ_ε</h2>",
             f"<p>{TABLE_NOTES['equal_mu']}</p>", html_table(_titled(tests))]
+
+
+def _variant_html(tests: pd.DataFrame) -> list[str]:
+    """Each variant against its configuration at the defaults (analysis.metrics.variant_tests); nothing without."""
+    if tests.empty:
+        return []
+    return ["<h2>Variants: each against its configuration at the defaults</h2>",
+            f"<p>{TABLE_NOTES['variants']}</p>", html_table(_titled(tests))]
 
 
 def _run_list(analysis: Analysis) -> pd.DataFrame:
@@ -428,7 +444,8 @@ def _analysis_tables(analysis: Analysis) -> dict[str, pd.DataFrame]:
     """The tables of the statistics by file stem: summary, aggregate, and those the data allows (not empty)."""
     tables = {"summary": analysis.summary, "aggregate": analysis.aggregate,
               f"composition_{PAPER_COMPOSITION_EPOCH}": analysis.composition_vs_paper,
-              "permutation_tests": analysis.tests, "equal_mu_tests": analysis.equal_mu_tests}
+              "permutation_tests": analysis.tests, "equal_mu_tests": analysis.equal_mu_tests,
+              "variant_tests": analysis.variant_tests}
     return {name: table for name, table in tables.items() if name in ("summary", "aggregate") or not table.empty}
 
 

@@ -59,7 +59,8 @@ COLUMNS: dict[str, Column] = {
     "p_epochs_to_0.9": Column("p: fewer epochs to 0.9 (smoothed)", PROBABILITY),
     "p_raw_epochs_to_0.5": Column("p: fewer epochs to 0.5 (raw)", PROBABILITY),
     "p_raw_epochs_to_0.9": Column("p: fewer epochs to 0.9 (raw)", PROBABILITY),
-    # the decay against the constant rate at the same mu_eps (analysis.metrics.equal_mu_tests)
+    # the decay against the constant rate at the same mu_eps, a variant against its defaults (analysis.metrics)
+    "variant": Column("variant"),
     "outcome": Column("outcome (per seed)"),
     "config_mean": Column("configuration: mean over seeds", MIXED),
     "versus_mean": Column("versus: mean over seeds", MIXED),

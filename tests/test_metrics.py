@@ -223,6 +223,40 @@ def test_each_decay_is_tested_in_both_directions_against_the_constant_rate_at_it
     assert (tests["splits"] == 10).all() and tests["smallest_p"].tolist() == pytest.approx([1 / 10] * 6)
 
 
+def test_each_variant_is_tested_in_both_directions_against_its_configuration_at_the_defaults(tmp_path):
+    """HER at precision=bf16 and at update=fast are each paired with HER (the same settings otherwise), not with
+    ARCHER (other reward weights) nor with each other; linear b1=0.5 at bf16 has no configuration at the defaults
+    to meet. HER's three flat seeds (0.9, 0.8, 0.7) against bf16's two (0.6, 0.5): of the C(5, 3) = 10 splits only
+    the observed one puts the three best on HER's side."""
+    import dataclasses
+
+    def at(precision: str = "fp32", update: str = "autograd", **settings) -> TrainConfig:
+        return dataclasses.replace(make_config(**settings), precision=precision, update=update)
+
+    linear = ScheduleConfig("linear", beta1=0.5)
+    for seed, level in enumerate([0.9, 0.8, 0.7]):
+        write_run(tmp_path / f"her{seed}", at(seed=seed), np.full(6, level))
+        write_run(tmp_path / f"archer{seed}", at(seed=seed, lambda_h=0.5), np.full(6, 0.1))
+    for seed, level in enumerate([0.6, 0.5]):
+        write_run(tmp_path / f"bf16-{seed}", at("bf16", seed=seed), np.full(6, level))
+        write_run(tmp_path / f"fast{seed}", at(update="fast", seed=seed), np.full(6, 0.8))
+        write_run(tmp_path / f"linear-bf16-{seed}", at("bf16", seed=seed, schedule=linear), np.full(6, 0.9))
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    tests = analysis.variant_tests
+    assert list(tests.columns) == metrics.VARIANT_COLUMNS
+    pairs = tests[["config", "versus", "variant"]].drop_duplicates().astype(str).values.tolist()
+    assert pairs == [["HER precision=bf16", "HER", "precision=bf16"], ["HER update=fast", "HER", "update=fast"]]
+    bf16 = tests[tests["variant"] == "precision=bf16"].set_index("outcome")
+    assert list(bf16.index) == metrics.EQUAL_MU_OUTCOMES
+    assert bf16.loc["final", ["config_mean", "versus_mean"]].tolist() == [0.55, 0.8]
+    for outcome in ("final", "raw_auc"):
+        assert bf16.loc[outcome, ["p_config_better", "p_versus_better"]].tolist() == pytest.approx([1.0, 1 / 10])
+    assert (bf16["splits"] == 10).all() and bf16["smallest_p"].tolist() == pytest.approx([1 / 10] * 6)
+    runs = analysis.runs.set_index("path")
+    assert runs["defaults_id"].nunique() == 3  # HER (with its variants), ARCHER, linear
+    assert runs.loc[runs["config"] == "HER precision=bf16", "variant"].eq("precision=bf16").all()
+
+
 def test_push_summary_equals_hand_values(push_analysis):
     summary = push_analysis.summary.set_index("config")
     # The median seed's average reaches 0.5 at epoch step + 25: HER's (60) at 85, the linear's (50) at 75.
