@@ -29,8 +29,10 @@ from servers import SlurmCluster, postgres_database, slurm_cluster, wait_until
 # One xdist worker runs them all: the SLURM cluster is started once per module and owns system paths.
 pytestmark = [pytest.mark.cluster, pytest.mark.xdist_group("servers")]
 
-# Tiny FetchReach runs: about 0.5 s per epoch on one core, so the kill lands part-way.
-TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64"]
+# Tiny FetchReach runs: about 0.5 s per epoch on one core, so the kill lands part-way; no bias evaluation
+# (about 8 s each on FetchReach; tests/test_bias.py evaluates).
+TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
+        "bias.epochs=[]"]
 EPOCHS = 16
 COMMAND_TIMEOUT = 240  # seconds for one sweep or search command
 

@@ -69,6 +69,7 @@ def test_the_report_draws_the_critic_from_real_logs(tmp_path):
 
     run = [o for o in TINY if o != "bias.epochs=[]"] + ["epochs=2", "quiet=true", "threads=1", "bias.epochs=[1,2]",
                                                         "bias.episodes=1", "bias.hindsight_pairs=2",
+                                                        "bias.moved_pairs=2", "bias.return_steps=60",
                                                         f"results_dir={tmp_path}"]
     for schedule in ("schedule=constant", "schedule=paper_linear_050"):
         for seed in (0, 1):

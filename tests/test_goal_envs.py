@@ -20,9 +20,9 @@ from hersd.engine.train import EpochStats, collect, evaluate, train
 
 pytestmark = pytest.mark.usefixtures("private_tempdir")  # maze envs' model files stay in tmp_path
 
-# One cycle of one epoch, one update on 64 transitions, one test round, no animation.
+# One cycle of one epoch, one update on 64 transitions, one test round, no animation, no bias evaluation.
 ONE_CYCLE = ["task.cycles_per_epoch=1", "ddpg.batches_per_cycle=1", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
-             "render_every=0", "quiet=true", "threads=1"]
+             "render_every=0", "quiet=true", "threads=1", "bias.epochs=[]"]
 POINT_MAZE = ["task=custom", "task.env_id=PointMaze_UMaze-v3"]
 TASK_CONFIGS = [["task=reach"], ["task=push"], ["task=pick_and_place"], ["task=slide"], ["task=hand_reach"],
                 ["task=hand_block"], POINT_MAZE]
@@ -165,7 +165,7 @@ def test_a_distance_threshold_for_an_env_with_a_fixed_radius_is_one_line():
 def test_hand_reach_ends_its_test_episodes_much_closer_to_the_goal_after_2_epochs(tmp_path):
     """HandReach (50 cycles/epoch, paper settings): success needs all five fingertips within
     1 cm, which a 2-epoch run rarely reaches, so the test reads the final distance instead."""
-    cfg = compose_train(["task=hand_reach", "epochs=2", "seed=0", "quiet=true", "threads=1",
+    cfg = compose_train(["task=hand_reach", "epochs=2", "seed=0", "quiet=true", "threads=1", "bias.epochs=[]",
                          f"results_dir={tmp_path}"])
     _, untrained_distance = evaluate(RunState(cfg))
     log = read_run(train(cfg))

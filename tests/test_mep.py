@@ -18,9 +18,10 @@ from hersd.contract.runlog import read_run
 from hersd.engine.train import train
 
 HORIZON = 50
-# 3 cycles of 4 updates on small networks: enough stored episodes for a mixture fit in epoch 2.
+# 3 cycles of 4 updates on small networks: enough stored episodes for a mixture fit in epoch 2; no bias
+# evaluation (tests/test_bias.py evaluates).
 TINY = ["task=reach", "task.cycles_per_epoch=3", "ddpg.batches_per_cycle=4", "ddpg.test_rollouts=1",
-        "ddpg.batch_size=64", "ddpg.hidden_units=32", "quiet=true", "threads=1"]
+        "ddpg.batch_size=64", "ddpg.hidden_units=32", "quiet=true", "threads=1", "bias.epochs=[]"]
 
 
 def reward_fn(achieved: np.ndarray, goal: np.ndarray) -> np.ndarray:

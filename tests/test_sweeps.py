@@ -17,7 +17,7 @@ from hersd.contract.runstore import RunFolder
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
-        "render_every=0"]
+        "render_every=0", "bias.epochs=[]"]
 
 
 def sweep(*args: str, check: bool = True) -> subprocess.CompletedProcess:
