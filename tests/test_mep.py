@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import hersd.engine.run_state as run_state_module
+import hersd.engine.replay.mep as mep_module
 import hersd.engine.train as train_module
 from hersd.contract.compose import compose_train as compose
 from hersd.contract.config import MEPConfig
@@ -127,7 +127,7 @@ def test_mep_off_leaves_the_training_sampler_untouched(tmp_path, monkeypatch):
         batches.append((batch.episode, batch.t, batch.goal))
         return batch
 
-    monkeypatch.setattr(run_state_module, "EpisodePrioritizer", no_prioritizer)
+    monkeypatch.setattr(mep_module, "EpisodePrioritizer", no_prioritizer)  # where the run state finds it
     monkeypatch.setattr(train_module, "sample_transitions", recording_sampler)
     log = read_run(train(compose([*TINY, "epochs=2", f"results_dir={tmp_path}"])))
     assert recorded_probs and all(p is None for p in recorded_probs)

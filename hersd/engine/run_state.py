@@ -21,7 +21,6 @@ from hersd.engine.envs.make import EnvSpec, check_success_reported, env_spec, ma
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.learners import GoalConditionedLearner, learner_class
 from hersd.engine.learners.fast import fast_learner_class
-from hersd.engine.replay.mep import EpisodePrioritizer
 from hersd.engine.replay.buffer import EpisodeBuffer
 from hersd.engine.resources import available_memory_bytes
 
@@ -54,8 +53,12 @@ class RunState:
         self.gamma, self.q_range = discounting(cfg, spec)
         self.agent = make_agent(cfg, spec, self.gamma, self.q_range, device)
         self.buffer = EpisodeBuffer(d.buffer_size, spec.horizon, spec.obs_dim, spec.goal_dim, spec.action_dim)
-        # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/engine/replay/mep.py).
-        self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity) if cfg.algo.mep.enabled else None
+        # MEP: episodes drawn by trajectory rarity instead of uniformly (hersd/engine/replay/mep.py; imported
+        # only for MEP runs: its scikit-learn and SciPy take over a second to import).
+        self.prioritizer = None
+        if cfg.algo.mep.enabled:
+            from hersd.engine.replay.mep import EpisodePrioritizer
+            self.prioritizer = EpisodePrioritizer(cfg.algo.mep, self.buffer.capacity)
         self.epochs_done = self.env_steps = self.updates = 0
         self.train_success: list[float] = []
 
