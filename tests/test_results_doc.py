@@ -1,12 +1,15 @@
-"""docs/RESULTS.md keeps provenance where it is generated: no commit id or resume epoch typed in its prose
-(quoted commands and code blocks may name them), and every section it points readers to exists."""
+"""docs/RESULTS.md and results/README.md keep provenance where it is generated: no commit id or resume epoch
+typed in their prose (quoted commands and code blocks may name them); every section of docs/RESULTS.md that
+other docs point readers to exists."""
 
 import re
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 COMMIT_ID = re.compile(r"\b(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}\b")  # hex with a digit and a letter
-RESUME_EPOCH = re.compile(r"resum\w*[^.;]{0,60}?\bepochs? \d", re.IGNORECASE)
+RESUME_EPOCH = re.compile(r"(resum\w*[^.;]{0,60}?|checkpoints? after )\bepochs? \d", re.IGNORECASE)
 
 
 def prose(markdown: str) -> list[str]:
@@ -26,11 +29,13 @@ def test_prose_checks_find_a_commit_id_and_a_resume_epoch_but_not_in_quoted_comm
     sample = "Ran at commit 1a2b3c4d, resumed from the checkpoint after epoch 85.\n`git show 88641a8:x`\n    git log 3fd1fd7\n"
     text = "\n".join(prose(sample))
     assert COMMIT_ID.findall(text) == ["1a2b3c4d"] and RESUME_EPOCH.search(text)
+    assert RESUME_EPOCH.search("from epoch 1 and from their checkpoints after epochs 101 / 94")
     assert not COMMIT_ID.search("\n".join(prose(sample.split("\n", 1)[1]))), "quoted commands are allowed"
 
 
-def test_results_md_prose_types_no_commit_id_and_no_resume_epoch():
-    lines = prose((ROOT / "docs/RESULTS.md").read_text(encoding="utf-8"))
+@pytest.mark.parametrize("doc", ["docs/RESULTS.md", "results/README.md"])
+def test_results_prose_types_no_commit_id_and_no_resume_epoch(doc):
+    lines = prose((ROOT / doc).read_text(encoding="utf-8"))
     commits = [line for line in lines if COMMIT_ID.search(line)]
     resumes = [line for line in lines if RESUME_EPOCH.search(line)]
     assert not commits, f"commit ids belong in results/report/tables/runs_provenance.csv: {commits[:3]}"
