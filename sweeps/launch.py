@@ -29,7 +29,7 @@ from hersd.contract.cores import available_cores, resolve_threads
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error
 from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas  # noqa: F401
-from sweeps.status import run_status
+from sweeps.status import run_status, time_to_go
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
@@ -83,7 +83,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
           f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
     if sweeper.dry_run:
-        list_runs(planned)
+        list_runs(planned, concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"]))
         return []
 
     to_launch = [run.job for directory, run in planned.items() if states[directory] != "complete"]
@@ -100,17 +100,21 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     return [results]
 
 
-def list_runs(planned: dict) -> None:
+def list_runs(planned: dict, at_once: int | None) -> None:
     """The dry run's listing: one line per run, in launch order, with its state (:mod:`sweeps.status`),
-    directory, progress and job; then the runs training now with their pids."""
-    holders = []
+    directory, progress and job; then the runs training now with their pids, and what is left
+    (:func:`sweeps.status.time_to_go`; ``at_once``: runs sharing this machine, None on a cluster)."""
+    statuses = []
     for directory, run in planned.items():
-        state, detail = run_status(directory, run.epochs)
-        print(f"  {state:<9} {directory}  " + (f"{detail}  " if detail else "") + f"[{' '.join(run.job)}]")
-        if state == "running":
-            holders.append(detail.split("pid ", 1)[1].split(",", 1)[0])
+        status = run_status(directory, run.epochs)
+        statuses.append(status)
+        print(f"  {status.state:<9} {directory}  " + (f"{status.detail}  " if status.detail else "")
+              + f"[{' '.join(run.job)}]")
+    holders = [status.detail.split("pid ", 1)[1].split(",", 1)[0] for status in statuses if status.state == "running"]
     if holders:
         print(f"{len(holders)} training now (pid {', '.join(holders)})")
+    if (left := time_to_go(statuses, at_once)) is not None:
+        print(left)
 
 
 def check_launcher(launcher: DictConfig) -> None:

@@ -8,13 +8,15 @@ store's files only (its log, checkpoint and lock file), so it works while runs a
 - ``new``        nothing yet, or a log without checkpoint (set aside when the run starts again).
 
 Runs started by hersd before lock files recorded pids show as ``resumable`` while they train;
-the age of their last epoch tells the two apart.
+the age of their last epoch tells the two apart. :func:`time_to_go` sums what the listed runs have left.
 """
 
 from __future__ import annotations
 
+import statistics
 import time
 from pathlib import Path
+from typing import NamedTuple, Sequence
 
 from hersd.contract.runlog import RunLogError
 from hersd.contract.runstore import RunFolder
@@ -28,20 +30,31 @@ def ago(seconds: float) -> str:
         else f"{seconds / 3600:.1f} h"
 
 
-def run_status(directory: Path, epochs: int, now: float | None = None) -> tuple[str, str]:
-    """(state, detail) of the run in ``directory`` planned for ``epochs`` epochs, e.g.
-    ``("running", "epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago")``."""
+class RunStatus(NamedTuple):
+    """A run's line in a sweep's listing: its state and detail, the epochs it has left, and, while it trains,
+    its pace (seconds per epoch, the mean of its last PACE_EPOCHS)."""
+
+    state: str
+    detail: str
+    epochs_left: int
+    pace: float | None = None
+
+
+def run_status(directory: Path, epochs: int, now: float | None = None) -> RunStatus:
+    """The status of the run in ``directory`` planned for ``epochs`` epochs, e.g. state ``running``, detail
+    ``epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago``, 155 epochs left, pace 31."""
     folder = RunFolder(directory)
     holder = folder.holder()
     done: list = []
     detail = []
+    pace = None
     try:
         records = folder.records()
     except RunLogError as err:
         detail.append(f"log unreadable ({str(err).removeprefix(f'{folder.log}: ')})")
     else:
         if records is not None and records.complete:
-            return "complete", f"{len(records.records)} epochs"
+            return RunStatus("complete", f"{len(records.records)} epochs", 0)
         if records is not None:
             done = records.records
             detail.append(f"epoch {len(done)} of {epochs}")
@@ -51,15 +64,33 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> tuple[
         detail.append(f"pid {holder}")
         recent = [record["epoch_seconds"] for record in done[-PACE_EPOCHS:]]
         if recent:
-            per_epoch = sum(recent) / len(recent)
-            detail.append(f"{per_epoch:.0f} s per epoch, ~{ago(per_epoch * max(epochs - len(done), 0))} to go")
+            pace = sum(recent) / len(recent)
+            detail.append(f"{pace:.0f} s per epoch, ~{ago(pace * max(epochs - len(done), 0))} to go")
     if done:
         detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - folder.log.stat().st_mtime))} ago")
-    has_checkpoint = folder.checkpoint.exists()
+    left = max(epochs - len(done), 0)
     if holder is not None:
-        return "running", ", ".join(detail)
-    if has_checkpoint:
-        return "resumable", ", ".join(detail)
+        return RunStatus("running", ", ".join(detail), left, pace)
+    if folder.checkpoint.exists():
+        return RunStatus("resumable", ", ".join(detail), left)
     if detail:
         detail.append("no checkpoint: starts afresh, the log kept aside")
-    return "new", ", ".join(detail)
+    return RunStatus("new", ", ".join(detail), epochs)
+
+
+def time_to_go(statuses: Sequence[RunStatus], at_once: int | None) -> str | None:
+    """What the listed runs have left, e.g. ``to go: 21 runs, 3880 epochs, ~11 h at 2 runs at once and 20 s
+    per epoch (the median pace of the runs training now)``: the time only when some run trains and the
+    sweep's runs share this machine (``at_once``, :func:`sweeps.launch.concurrent_runs`; None on a cluster).
+    None when nothing is left."""
+    left = [status for status in statuses if status.state != "complete"]
+    if not left:
+        return None
+    epochs = sum(status.epochs_left for status in left)
+    line = f"to go: {len(left)} run{'s' * (len(left) > 1)}, {epochs} epochs"
+    paces = [status.pace for status in left if status.pace is not None]
+    if paces and at_once:
+        pace, at_once = statistics.median(paces), min(at_once, len(left))
+        line += (f", ~{ago(epochs * pace / at_once)} at {at_once} run{'s' * (at_once > 1)} at once and {pace:.0f} s "
+                 "per epoch (the median pace of the runs training now)")
+    return line

@@ -13,7 +13,7 @@ import numpy as np
 from analysis.synthetic import write_run
 from hersd.contract.config import TrainConfig
 from hersd.contract.runstore import RunFolder
-from sweeps.status import run_status
+from sweeps.status import RunStatus, run_status, time_to_go
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 
@@ -26,22 +26,35 @@ def write_log(directory: Path, epochs_done: int, complete: bool = False) -> Path
 
 def test_each_state_with_its_progress(tmp_path):
     now = 1e10
-    assert run_status(tmp_path / "nothing", 200) == ("new", "")
+    assert run_status(tmp_path / "nothing", 200) == RunStatus("new", "", 200)
     write_log(tmp_path / "done", 200, complete=True)
-    assert run_status(tmp_path / "done", 200) == ("complete", "200 epochs")
+    assert run_status(tmp_path / "done", 200) == RunStatus("complete", "200 epochs", 0)
     write_log(tmp_path / "paused", 12)
     (tmp_path / "paused" / "checkpoint.pt").write_bytes(b"")
     log_time = (tmp_path / "paused" / "run.mcap").stat().st_mtime
     assert run_status(tmp_path / "paused", 200, now=log_time + 3 * 3600) == \
-        ("resumable", "epoch 12 of 200, last epoch 3.0 h ago")
+        RunStatus("resumable", "epoch 12 of 200, last epoch 3.0 h ago", 188)
     write_log(tmp_path / "lost", 5)
-    assert run_status(tmp_path / "lost", 200)[0] == "new"
-    assert "epoch 5 of 200" in run_status(tmp_path / "lost", 200)[1]
+    lost = run_status(tmp_path / "lost", 200)
+    assert lost.state == "new" and "epoch 5 of 200" in lost.detail and lost.epochs_left == 200  # starts afresh
     write_log(tmp_path / "training", 7)
     with RunFolder(tmp_path / "training").lock():
-        state, detail = run_status(tmp_path / "training", 200, now=now)
-    assert state == "running"
-    assert detail.startswith(f"epoch 7 of 200, pid {os.getpid()}, 45 s per epoch, ~2.4 h to go")  # 193 x 45 s
+        training = run_status(tmp_path / "training", 200, now=now)
+    assert training.state == "running" and (training.epochs_left, training.pace) == (193, 45.0)
+    assert training.detail.startswith(f"epoch 7 of 200, pid {os.getpid()}, 45 s per epoch, ~2.4 h to go")  # 193 x 45 s
+
+
+def test_time_to_go_sums_the_epochs_left_at_the_median_pace_of_the_runs_training():
+    statuses = [RunStatus("complete", "", 0), RunStatus("running", "", 100, 30.0), RunStatus("running", "", 50, 50.0),
+                RunStatus("running", "", 10, 20.0), RunStatus("resumable", "", 40), RunStatus("new", "", 200)]
+    # 400 epochs at 30 s (the median of 20, 30, 50), 2 at once: 6000 s
+    assert time_to_go(statuses, 2) == ("to go: 5 runs, 400 epochs, ~100 min at 2 runs at once and 30 s per epoch "
+                                       "(the median pace of the runs training now)")
+    assert time_to_go(statuses[4:], 2) == "to go: 2 runs, 240 epochs"  # none trains: no pace to go by
+    assert time_to_go(statuses, None) == "to go: 5 runs, 400 epochs"  # a cluster's runs: no time
+    assert time_to_go([RunStatus("running", "", 10, 20.0)], 8) == \
+        "to go: 1 run, 10 epochs, ~3 min at 1 run at once and 20 s per epoch (the median pace of the runs training now)"
+    assert time_to_go(statuses[:1], 2) is None
 
 
 def test_a_dry_run_lists_each_run_with_its_state_and_the_pids_training(tmp_path):
@@ -54,4 +67,5 @@ def test_a_dry_run_lists_each_run_with_its_state_and_the_pids_training(tmp_path)
         out = subprocess.run([*SWEEP, *args], capture_output=True, text=True, check=True).stdout.splitlines()
     assert out[1].split()[:3] == ["complete", str(runs[0]), "4"]
     assert out[2].split()[:2] == ["running", str(runs[1])] and f"epoch 2 of 4, pid {os.getpid()}," in out[2]
-    assert out[-1] == f"1 training now (pid {os.getpid()})"
+    assert out[-2] == f"1 training now (pid {os.getpid()})"
+    assert out[-1].startswith("to go: 1 run, 2 epochs, ~")  # the running run's 2 epochs left
