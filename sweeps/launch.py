@@ -110,7 +110,7 @@ def list_runs(planned: dict, at_once: int | None) -> None:
         statuses.append(status)
         print(f"  {status.state:<9} {directory}  " + (f"{status.detail}  " if status.detail else "")
               + f"[{' '.join(run.job)}]")
-    holders = [status.detail.split("pid ", 1)[1].split(",", 1)[0] for status in statuses if status.state == "running"]
+    holders = [str(status.holder) for status in statuses if status.state == "running"]
     if holders:
         print(f"{len(holders)} training now (pid {', '.join(holders)})")
     if (left := time_to_go(statuses, at_once)) is not None:

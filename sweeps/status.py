@@ -32,12 +32,13 @@ def ago(seconds: float) -> str:
 
 class RunStatus(NamedTuple):
     """A run's line in a sweep's listing: its state and detail, the epochs it has left, and, while it trains,
-    its pace (seconds per epoch, the mean of its last PACE_EPOCHS)."""
+    its pace (seconds per epoch, the mean of its last PACE_EPOCHS) and the pid holding its lock."""
 
     state: str
     detail: str
     epochs_left: int
     pace: float | None = None
+    holder: int | None = None
 
 
 def run_status(directory: Path, epochs: int, now: float | None = None) -> RunStatus:
@@ -70,7 +71,7 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> RunSta
         detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - folder.log.stat().st_mtime))} ago")
     left = max(epochs - len(done), 0)
     if holder is not None:
-        return RunStatus("running", ", ".join(detail), left, pace)
+        return RunStatus("running", ", ".join(detail), left, pace, holder)
     if folder.checkpoint.exists():
         return RunStatus("resumable", ", ".join(detail), left)
     if detail:
