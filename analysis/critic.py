@@ -5,7 +5,8 @@
   hindsight goals and hindsight goals the object was moved to, hersd/engine/bias.py; the mean Q of real-goal and relabelled training rows);
 - :func:`integrated_bias`: per run and goal type, the bias averaged over epochs 1-50 (trapezoids
   over the evaluated epochs, so the dense early evaluations weigh what they span);
-- :func:`bias_tests`: two-sided permutation tests of that average between the configurations of a task.
+- :func:`bias_tests`: two-sided permutation tests of that average between the configurations of a task;
+- :func:`bias_evaluations`: every logged evaluation of every run, one row each (``tables/bias_evaluations.csv``).
 
 Pure computations on the tables of :mod:`analysis.load`; the figure is drawn in :mod:`analysis.figures`.
 """
@@ -20,6 +21,8 @@ from analysis.metrics import BOOTSTRAP_SEED, GROUP, PERMUTATION_RESAMPLES, _mean
 GOAL_TYPES = ("real", "hindsight", "moved")
 CRITIC_COLUMNS = ("bias_real_mean", "bias_hindsight_mean", "bias_moved_mean", "q_real_mean", "q_hindsight_mean")
 INTEGRATION_EPOCHS = (1, 50)
+EVALUATION_COLUMNS = ["task", "config", "seed", "complete", "epoch", "bias_real_mean", "bias_hindsight_mean",
+                      "bias_hindsight_zero_share", "bias_moved_mean", "bias_moved_count", "bias_seconds", "path"]
 BIAS_TEST_COLUMNS = ["task", "goal_type", "config", "versus", "seeds", "versus_seeds", "config_bias", "versus_bias",
                      "difference", "p_two_sided"]
 
@@ -80,3 +83,10 @@ def bias_tests(integrated: pd.DataFrame, seed: int = BOOTSTRAP_SEED) -> pd.DataF
                                  "versus_bias": y.mean(), "difference": x.mean() - y.mean(),
                                  "p_two_sided": float(result.pvalue)})
     return pd.DataFrame.from_records(rows, columns=BIAS_TEST_COLUMNS)
+
+
+def bias_evaluations(epochs: pd.DataFrame) -> pd.DataFrame:
+    """One row per run x epoch with a bias evaluation, as its log holds it (columns: EVALUATION_COLUMNS; fields a
+    log's gauge did not yet have are empty), ordered by task, configuration, seed and epoch."""
+    evaluated = epochs[epochs["bias_seconds"].notna()]
+    return evaluated.sort_values([*GROUP, "seed", "path", "epoch"])[EVALUATION_COLUMNS].reset_index(drop=True)

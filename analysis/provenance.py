@@ -2,8 +2,8 @@
 
 A run's log holds one ``/run/meta`` message per training session (the first start, then one per
 resume; :mod:`hersd.contract.runlog`). :func:`session_rows` keeps what each session says about the code and the
-machine that ran it; :func:`provenance_table` makes one row per run of them (columns:
-:data:`PROVENANCE_COLUMNS`), written as ``tables/runs_provenance.csv`` and ``.md``. A field a session's
+machine that ran it; :func:`provenance_table` makes one row per run of them and of its cost (:func:`run_cost`;
+columns: :data:`PROVENANCE_COLUMNS`), written as ``tables/runs_provenance.csv`` and ``.md``. A field a session's
 log lacks (logs written before hersd recorded it) reads ``not logged``; :func:`provenance_note` says
 once which fields and how many runs.
 """
@@ -36,6 +36,10 @@ PROVENANCE_COLUMNS = (
     "dirty",              # a session ran code with uncommitted changes
     "cpu", "threads", "flush_denormal",  # one value, or one per session where they differ
     "seconds_per_epoch",  # median wall-clock seconds of the run's epochs
+    "epoch_hours",        # the run's cost: wall-clock hours of its epochs, summed (epoch_seconds; bias evaluations apart)
+    "bias_evaluations",   # epochs with a bias evaluation (hersd/engine/bias.py)
+    "bias_seconds",       # their wall-clock seconds, summed (bias_seconds)
+    "bias_percent",       # bias_seconds as a percentage of the epochs' summed seconds (0 without evaluations)
     "first_date", "last_date",  # UTC: the first session's start, the log's last message's time
 )
 # the page's table: a run named by its task, configuration and seed (its folder the tooltip), then its
@@ -44,6 +48,8 @@ PAGE_COLUMNS = {"run": Column("run"), "epochs_done": Column("epochs done"), "ses
                 "resume_epochs": Column("resumed at epochs"), "commits": Column("commit per session"),
                 "dirty": Column("dirty"), "cpu": Column("CPU"), "threads": Column("threads"),
                 "flush_denormal": Column("flush denormals"), "seconds_per_epoch": RUN_COLUMNS["seconds_per_epoch"],
+                "epoch_hours": Column("hours of epochs", "{:.2f}"),
+                "bias_percent": Column("bias evaluations (% of epoch time)", "{:.2f}"),
                 "first_date": Column("first start (UTC)"), "last_date": Column("last log message (UTC)")}
 # the columns made from a run's sessions (_run_provenance)
 SESSION_CELLS = ("sessions", "resume_epochs", "commits", "dirty", *MAYBE_UNLOGGED, "first_date", "last_date")
@@ -117,6 +123,18 @@ def _run_provenance(sessions: list[dict[str, Any]]) -> dict[str, Any]:
             "last_date": _date(max(session["ended"] for session in sessions))}
 
 
+def run_cost(epochs: pd.DataFrame) -> pd.DataFrame:
+    """Per run (index ``run``), from its logged epochs: ``seconds_per_epoch`` (median), ``epoch_hours``,
+    ``bias_evaluations``, ``bias_seconds`` and ``bias_percent`` (:data:`PROVENANCE_COLUMNS`)."""
+    grouped = epochs.groupby("run")
+    cost = pd.DataFrame({"seconds_per_epoch": grouped["epoch_seconds"].median(),
+                         "epoch_seconds": grouped["epoch_seconds"].sum(),
+                         "bias_evaluations": grouped["bias_seconds"].count(),
+                         "bias_seconds": grouped["bias_seconds"].sum()})  # sum of none: 0
+    return cost.assign(epoch_hours=cost["epoch_seconds"] / 3600,
+                       bias_percent=100 * cost["bias_seconds"] / cost["epoch_seconds"]).drop(columns="epoch_seconds")
+
+
 def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.DataFrame) -> pd.DataFrame:
     """One row per run (columns :data:`PROVENANCE_COLUMNS`), ordered by task (the paper's first), configuration
     and seed: ``runs``, ``epochs`` and ``sessions`` as :class:`analysis.load.RunTable` holds them."""
@@ -125,9 +143,8 @@ def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.Data
         by_run.setdefault(session["run"], []).append(session)
     cells = pd.DataFrame.from_records([{"run": run, **_run_provenance(rows)} for run, rows in by_run.items()],
                                       columns=["run", *SESSION_CELLS])
-    seconds = epochs.groupby("run")["epoch_seconds"].median().rename("seconds_per_epoch")
     own = runs.drop(columns=[name for name in SESSION_CELLS if name in runs.columns])  # runs.cpu: the first session's
-    table = (own.merge(cells, on="run", how="left").merge(seconds, left_on="run", right_index=True, how="left")
+    table = (own.merge(cells, on="run", how="left").merge(run_cost(epochs), left_on="run", right_index=True, how="left")
              .assign(folder=[path.rsplit("/", 1)[0] if "/" in path else "." for path in runs["path"]],
                      task_order=runs["task"].map(lambda task: task_rank(task)[0])))
     table = table.sort_values(["task_order", "task", "config", "seed", "folder"])
@@ -161,6 +178,7 @@ def provenance_html(table: pd.DataFrame) -> list[str]:
     return ["<h2>Provenance of the runs</h2>",
             '<details class="provenance"><summary>Per run, from its log: the commit of each session (-dirty: with '
             "uncommitted changes), the CPU, threads and flush_denormal setting, the epochs it was resumed at, its "
-            'seconds per epoch and dates (click to open; all columns in <a href="tables/runs_provenance.csv">'
-            "tables/runs_provenance.csv</a>)</summary>" + (f"<p>{html.escape(note)}</p>" if note else "")
+            "seconds per epoch, hours of epochs, the bias evaluations' share of them and dates (click to open; all "
+            'columns in <a href="tables/runs_provenance.csv">tables/runs_provenance.csv</a>)</summary>'
+            + (f"<p>{html.escape(note)}</p>" if note else "")
             + html_table(shown, columns=PAGE_COLUMNS, titles={"run": table["folder"]}) + "</details>"]

@@ -13,7 +13,9 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/variant_tests.csv|.md  per task, each variant (precision=bf16, update=fast) against its configuration at
                                  the defaults, both directions
     tables/runs.csv              the runs behind them
-    tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates
+    tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates,
+                                 hours of epochs and the bias evaluations' share of them
+    tables/bias_evaluations.csv  per run, every bias evaluation its log holds (epoch, bias per goal type, seconds)
     search/<study>_*             each Optuna study's beta-plane figure and best trials
 
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
@@ -40,7 +42,7 @@ import pandas as pd
 from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
                                  place_after_curves)
 from analysis.claims import claims_table
-from analysis.critic import GOAL_TYPES, bias_tests, integrated_bias
+from analysis.critic import GOAL_TYPES, bias_evaluations, bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from analysis.provenance import provenance_html, provenance_table
@@ -214,14 +216,17 @@ def _render(job: tuple[ReportFigure, Path, str]) -> str:
     return f'<img alt="{html.escape(report_figure.title)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
 
 
+CSV_ONLY = ("runs", "bias_evaluations")  # tables too long to read as markdown
+
+
 def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
-    """``<name>.csv`` for each table, and ``<name>.md`` but for the run list."""
+    """``<name>.csv`` for each table, and ``<name>.md`` but for those of CSV_ONLY."""
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, table in tables.items():
         table.to_csv(folder / f"{name}.csv", index=False, float_format="%.6g")
         written.append(folder / f"{name}.csv")
-        if name != "runs":
+        if name not in CSV_ONLY:
             (folder / f"{name}.md").write_text(markdown_table(table), encoding="utf-8")
             written.append(folder / f"{name}.md")
     return written
@@ -458,6 +463,8 @@ def _report_tables(table: RunTable, analysis: Analysis) -> tuple[dict[str, pd.Da
     if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
         tables["claims"] = claims
     tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
+    if not (evaluations := bias_evaluations(table.epochs)).empty:
+        tables["bias_evaluations"] = evaluations
     return tables, critic_tests, claims
 
 

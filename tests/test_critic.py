@@ -85,3 +85,11 @@ def test_the_report_draws_the_critic_from_real_logs(tmp_path):
 
     result = build_report(tmp_path, out=tmp_path / "report", log=lambda line: None)
     assert 'id="critic_bias"' in result.index.read_text()
+    written = pd.read_csv(tmp_path / "report" / "tables" / "bias_evaluations.csv")  # every evaluation, as logged
+    assert len(written) == 8 and written.groupby("path")["epoch"].agg(list).tolist() == [[1, 2]] * 4
+    logged = table.epochs.dropna(subset=["bias_seconds"]).set_index(["path", "epoch"])
+    for column in ("bias_real_mean", "bias_moved_count", "bias_hindsight_zero_share", "bias_seconds"):
+        assert written.set_index(["path", "epoch"])[column].to_numpy() == pytest.approx(
+            logged.loc[written.set_index(["path", "epoch"]).index, column].to_numpy(float), rel=1e-5, nan_ok=True)
+    cost = pd.read_csv(tmp_path / "report" / "tables" / "runs_provenance.csv")
+    assert cost["bias_evaluations"].tolist() == [2] * 4 and (cost["bias_percent"] > 0).all()
