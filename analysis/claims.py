@@ -11,6 +11,8 @@ that decides it; :func:`claims_table` reads the measurement from the report's ow
   (the other direction's p below ALPHA) otherwise;
 - a claim that two do alike (FetchSlide): ``consistent: not separated at n v m`` when the two-sided p
   (twice the smaller one-sided p) is at least ALPHA, ``not reproduced: separated`` otherwise;
+- ``not reproduced: both final medians are 0`` (``neither median reaches <level>``) whatever p says, where
+  neither configuration's median learns: two arms that both fail are not alike in the paper's sense;
 - ``not measured yet`` where either configuration lacks two complete seeds.
 
 The configurations are named by the schedule classes themselves (:func:`analysis.load.config_label`), so
@@ -104,6 +106,8 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         p_better, p_worse = _one_sided(claim, tests)
         p = min(1.0, 2 * min(p_better, p_worse)) if two_sided else p_better
     row |= {"test": _test_words(seeds, versus_seeds, two_sided), "p": p}
+    if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
+        return row | {"verdict": f"not reproduced: {failed} at {at}"}
     if claim.alike:
         return row | {"verdict": f"consistent: not separated at {at}" if p >= ALPHA else "not reproduced: separated"}
     if p_better < ALPHA and (direction or not two_sided):
@@ -115,6 +119,15 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     else:
         verdict = "not reproduced: the other way, not significant"
     return row | {"verdict": verdict}
+
+
+def _neither_learns(statistic: str, value: float, versus_value: float) -> str | None:
+    """The words for two medians that both fail (final success 0, or a level never reached), else None."""
+    if statistic == "final" and value == versus_value == 0:
+        return "both final medians are 0"
+    if statistic.startswith("epochs_to_") and math.isnan(value) and math.isnan(versus_value):
+        return f"neither median reaches {statistic.removeprefix('epochs_to_')}"
+    return None
 
 
 def _test_words(seeds: int, versus_seeds: int, two_sided: bool) -> str:

@@ -59,6 +59,18 @@ def test_an_alike_claim_is_two_sided_and_says_its_power():
     assert row["test"].endswith(f"(smallest p possible {2 / math.comb(8, 3):.2g})")
 
 
+def test_two_arms_that_both_fail_are_not_reproduced_whatever_p_says():
+    slide = Claim("push", "alike", "Fig. 8", LINEAR_025, HER, "final", alike=True)
+    failed = summary_table(100, 140).assign(final_median=[0.0, 0.0, 0.0])
+    row = claims_table(failed, permutation_table(1.0, 1.0), NO_BIAS, (slide,)).iloc[0]
+    assert row["p"] == 1.0 and row["verdict"] == "not reproduced: both final medians are 0 at 5 v 5"
+    assert claims_table(failed.assign(final_median=[0.0, 0.02, 0.0]), permutation_table(0.9, 0.3), NO_BIAS,
+                        (slide,)).iloc[0]["verdict"] == "consistent: not separated at 5 v 5"
+    never = summary_table(np.nan, np.nan)
+    row = claims_table(never, permutation_table(1.0, 1.0), NO_BIAS, (FASTER,)).iloc[0]
+    assert row["verdict"] == "not reproduced: neither median reaches 0.9 at 5 v 5" and "never" in row["hersd"]
+
+
 def test_too_few_seeds_is_not_measured_and_a_task_without_runs_has_no_rows():
     row = claims_table(summary_table(100, 140, seeds=1), permutation_table(0.01, 0.99), NO_BIAS, (FASTER,)).iloc[0]
     assert row["verdict"] == "not measured yet" and np.isnan(row["p"])
