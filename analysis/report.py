@@ -16,6 +16,8 @@ Output (``<FOLDER>/report`` unless ``--out``)::
     tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates,
                                  hours of epochs and the bias evaluations' share of them
     tables/bias_evaluations.csv  per run, every bias evaluation its log holds (epoch, bias per goal type, seconds)
+    tables/per_seed.csv          per run, its outcomes and its values at fixed epochs (analysis.seeds): the
+                                 per-seed tables of docs/RESULTS.md
     search/<study>_*             each Optuna study's beta-plane figure and best trials
 
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
@@ -46,6 +48,7 @@ from analysis.critic import GOAL_TYPES, bias_evaluations, bias_tests, integrated
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
 from analysis.provenance import provenance_html, provenance_table
+from analysis.seeds import seed_values
 from analysis.studies import StudyStorage, open_study_storage
 from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
@@ -216,7 +219,10 @@ def _render(job: tuple[ReportFigure, Path, str]) -> str:
     return f'<img alt="{html.escape(report_figure.title)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
 
 
-CSV_ONLY = ("runs", "bias_evaluations")  # tables too long to read as markdown
+CSV_ONLY = ("runs", "bias_evaluations", "per_seed")  # tables too long to read as markdown
+# tables whose numbers are written exactly (shortest round trip), not to 6 significant digits: the logs'
+# values, which docs/RESULTS.md rounds itself (analysis.doc_tables)
+EXACT = ("bias_evaluations", "per_seed")
 
 
 def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
@@ -224,7 +230,7 @@ def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, table in tables.items():
-        table.to_csv(folder / f"{name}.csv", index=False, float_format="%.6g")
+        table.to_csv(folder / f"{name}.csv", index=False, float_format=None if name in EXACT else "%.6g")
         written.append(folder / f"{name}.csv")
         if name not in CSV_ONLY:
             (folder / f"{name}.md").write_text(markdown_table(table), encoding="utf-8")
@@ -465,6 +471,7 @@ def _report_tables(table: RunTable, analysis: Analysis) -> tuple[dict[str, pd.Da
     tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
     if not (evaluations := bias_evaluations(table.epochs)).empty:
         tables["bias_evaluations"] = evaluations
+    tables["per_seed"] = seed_values(table.runs, table.epochs, analysis.curves, analysis.outcomes)
     return tables, critic_tests, claims
 
 

@@ -1,0 +1,125 @@
+"""``python -m analysis.doc_tables FILE...``: rewrite the generated blocks of markdown files from a report's tables.
+
+A block is the text between an opening comment and its closing one; everything outside blocks is left
+as it is. Kinds (the opening comment's first word):
+
+- ``<!-- claims ... -->`` ... ``<!-- /claims -->``: the claims tables (:func:`analysis.claims.claims_markdown`
+  of ``claims.csv``);
+- ``<!-- claims-list ... -->`` ... ``<!-- /claims-list -->``: one line per measured claim: task, claim,
+  figure, verdict, p and seeds (README.md's opening);
+- ``<!-- seeds task=T config="C" seeds=0-4 name=N rows=smoothed,raw_epochs -->`` ... ``<!-- /seeds -->``:
+  a per-seed table of ``per_seed.csv`` (:func:`analysis.seeds.seed_markdown`; ``seeds`` a range ``a-b`` or a
+  list ``0,2,3``; ``rows`` keys of :data:`analysis.seeds.SEED_ROWS`).
+
+``--check`` rewrites nothing and exits 1 naming each file whose blocks differ from what the tables give
+(the tests run it on docs/RESULTS.md and README.md against the committed report). Bad input (a missing
+file or table, an unknown block, a configuration without such seeds) is one line on stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from analysis.claims import claims_markdown
+from analysis.seeds import seed_markdown
+from hersd.contract.tasks import task_title
+
+DEFAULT_TABLES = Path("results/report/tables")
+BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
+
+
+class DocTablesError(ValueError):
+    """A block or a table that cannot be rendered: the message says which and what to do."""
+
+
+def read_table(tables: Path, name: str, **options) -> pd.DataFrame:
+    path = tables / f"{name}.csv"
+    if not path.is_file():
+        raise DocTablesError(f"{path} does not exist: run `hersd-report` on the logs first")
+    return pd.read_csv(path, **options)
+
+
+def _claims(tables: Path) -> pd.DataFrame:
+    table = read_table(tables, "claims", dtype=str, keep_default_na=False)
+    return table.assign(p=pd.to_numeric(table["p"], errors="coerce"))
+
+
+def claims_list(table: pd.DataFrame) -> str:
+    """One markdown bullet per measured claim (``table``: claims.csv as :func:`_claims` reads it)."""
+    lines = [f"- {task_title(row.task)}, {row.claim} ({row.paper}): {row.verdict} (p = {row.p:.2g}, "
+             f"{row.seeds} seeds)." for row in table.itertuples() if np.isfinite(row.p)]
+    return "\n".join(lines) + "\n"
+
+
+def _seeds(words: str) -> list[int]:
+    if re.fullmatch(r"\d+-\d+", words):
+        first, last = (int(part) for part in words.split("-"))
+        return list(range(first, last + 1))
+    if re.fullmatch(r"\d+(,\d+)*", words):
+        return [int(part) for part in words.split(",")]
+    raise DocTablesError(f"seeds={words!r}: give a range like 0-4 or a list like 0,2,3")
+
+
+def _seed_block(options: str, tables: Path) -> str:
+    try:
+        settings = dict(part.split("=", 1) for part in shlex.split(options))
+    except ValueError:
+        raise DocTablesError(f"seeds block {options.strip()!r}: write key=value pairs (quote a value with spaces)")
+    needed = ("task", "config", "seeds", "name", "rows")
+    if missing := [key for key in needed if key not in settings]:
+        raise DocTablesError(f"seeds block {options.strip()!r} lacks {', '.join(missing)}")
+    try:
+        return seed_markdown(read_table(tables, "per_seed"), settings["task"], settings["config"],
+                             _seeds(settings["seeds"]), settings["name"], settings["rows"].split(","))
+    except ValueError as error:
+        raise DocTablesError(f"seeds block {options.strip()!r}: {error}") from None
+
+
+def render(text: str, tables: Path) -> str:
+    """``text`` with every block rewritten from the tables in ``tables``."""
+    def block(match: re.Match) -> str:
+        opening, kind, options, _, closing = match.groups()
+        body = (claims_markdown(_claims(tables)) if kind == "claims" else claims_list(_claims(tables))
+                if kind == "claims-list" else _seed_block(options, tables))
+        return opening + body + closing
+
+    return BLOCK.sub(block, text)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m analysis.doc_tables", description=__doc__.split("\n")[0])
+    parser.add_argument("files", nargs="+", type=Path, help="markdown files with generated blocks")
+    parser.add_argument("--tables", type=Path, default=DEFAULT_TABLES, help=f"the report's tables (default {DEFAULT_TABLES})")
+    parser.add_argument("--check", action="store_true", help="rewrite nothing; exit 1 if a block is stale")
+    args = parser.parse_args(argv)
+    stale = []
+    try:
+        for path in args.files:
+            if not path.is_file():
+                raise DocTablesError(f"{path} does not exist")
+            text = path.read_text(encoding="utf-8")
+            if not BLOCK.search(text):
+                raise DocTablesError(f"{path} has no generated block (<!-- claims -->, <!-- seeds ... -->)")
+            rendered = render(text, args.tables)
+            if rendered != text:
+                stale.append(path)
+                if not args.check:
+                    path.write_text(rendered, encoding="utf-8")
+    except DocTablesError as error:
+        print(f"doc_tables: {error}", file=sys.stderr)
+        return 2
+    for path in stale:
+        print(f"{path}: {'stale: run python -m analysis.doc_tables ' + str(path) if args.check else 'rewritten'}")
+    return 1 if args.check and stale else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
