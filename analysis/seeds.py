@@ -21,6 +21,7 @@ import pandas as pd
 
 from analysis.critic import GOAL_TYPES, integrated_bias
 from analysis.metrics import GROUP, RUN_AUC, RUN_OUTCOME_COLUMNS
+from analysis.provenance import run_cost
 
 # logged field -> the epochs a per-seed table reads it at
 CHECKPOINTS = {
@@ -28,6 +29,7 @@ CHECKPOINTS = {
     "relabel_rate": (1, 50, 100, 150, 200),
     "q_mean": (10, 50, 100, 200),
     "bias_real_mean": (1, 10, 20, 50, 100, 200),
+    "bias_moved_mean": (1, 10, 20, 50, 100, 200),  # empty where no hindsight pair had moved the object
     "share_real_success": (150,), "share_hindsight": (150,), "share_real_failure": (150,),
 }
 BIAS_1_50 = "bias_real_1_50"  # the real-goal bias averaged over epochs 1-50
@@ -40,7 +42,7 @@ def checkpoint(field: str, epoch: int) -> str:
 
 SEED_COLUMNS = ["task", "config", "seed", "complete", "epochs_done", *RUN_OUTCOME_COLUMNS, RUN_AUC, "mu_eps",
                 *(checkpoint(field, epoch) for field, epochs in CHECKPOINTS.items() for epoch in epochs), BIAS_1_50,
-                "path"]
+                "epoch_hours", "bias_percent", "path"]
 
 
 def seed_values(runs: pd.DataFrame, epochs: pd.DataFrame, curves: pd.DataFrame,
@@ -58,6 +60,7 @@ def seed_values(runs: pd.DataFrame, epochs: pd.DataFrame, curves: pd.DataFrame,
     evaluated = epochs.dropna(subset=["bias_real_mean"])
     bias = integrated_bias(evaluated[[*GROUP, "run", "epoch", *(f"bias_{kind}_mean" for kind in GOAL_TYPES)]])
     table = table.merge(bias[["run", "bias_real"]].rename(columns={"bias_real": BIAS_1_50}), on="run", how="left")
+    table = table.merge(run_cost(epochs)[["epoch_hours", "bias_percent"]], left_on="run", right_index=True, how="left")
     return table.sort_values([*GROUP, "seed", "path"])[SEED_COLUMNS].reset_index(drop=True)
 
 
@@ -69,6 +72,7 @@ class SeedRow:
     columns: tuple[str, ...]
     form: Callable[[float], str]
     last: str | None = None  # a summary column after "; "
+    last_form: Callable[[float], str] | None = None  # its form, if not ``form``
 
 
 def _share(value: float) -> str:
@@ -94,21 +98,26 @@ SEED_ROWS = {
     "bias": SeedRow("critic bias on real goals at epoch 1 / 10 / 20 / 50 / 100 / 200; averaged over epochs 1-50",
                     tuple(checkpoint("bias_real_mean", epoch) for epoch in CHECKPOINTS["bias_real_mean"]),
                     "{:+.1f}".format, last=BIAS_1_50),
+    "moved": SeedRow("critic bias on hindsight goals the object was moved to, at epoch 1 / 10 / 20 / 50 / 100 / 200",
+                     tuple(checkpoint("bias_moved_mean", epoch) for epoch in CHECKPOINTS["bias_moved_mean"]),
+                     "{:+.1f}".format),
     "rate": SeedRow("relabel rate at epoch 1 / 50 / 100 / 150 / 200; its mean over the 200 epochs",
                     tuple(checkpoint("relabel_rate", epoch) for epoch in CHECKPOINTS["relabel_rate"]), _share,
                     last="mu_eps"),
-    "outcome": SeedRow("final smoothed test success; mean raw test success over the epochs (AUC)", ("final",), _share,
-                       last=RUN_AUC),
+    "outcome": SeedRow("final smoothed test success; mean raw test success over the epochs (raw AUC)", ("final",),
+                       _share, last=RUN_AUC),
+    "cost": SeedRow("hours of epochs; the bias evaluations' share of them", ("epoch_hours",), "{:.2f} h".format,
+                    last="bias_percent", last_form="{:.2f} %".format),
 }
 
 
 def _cell(row: SeedRow, values: pd.Series) -> str:
-    def shown(column: str) -> str:
+    def shown(column: str, form: Callable[[float], str]) -> str:
         value = values[column]
-        return "-" if pd.isna(value) and row.form is not _epoch else row.form(value)
+        return "-" if pd.isna(value) and form is not _epoch else form(value)
 
-    cell = " / ".join(shown(column) for column in row.columns)
-    return cell + (f"; {shown(row.last)}" if row.last else "")
+    cell = " / ".join(shown(column, row.form) for column in row.columns)
+    return cell + (f"; {shown(row.last, row.last_form or row.form)}" if row.last else "")
 
 
 def seed_markdown(table: pd.DataFrame, task: str, config: str, seeds: Sequence[int], name: str,

@@ -74,6 +74,10 @@ def test_a_table_renders_a_column_per_seed_and_marks_what_a_run_lacks(tables):
     assert lines[4].split(" | ")[1] == "-1.00 / -5.00 / -10.00 / -20.00"
     assert lines[5].split(" | ")[1] == "+100.0 / +10.0 / +5.0 / +2.0 / +1.0 / +0.5; +13.8"  # 675 / 49
     assert lines[5].endswith("| - / - / - / - / - / -; - |")  # seed 1 logged no bias
+    moved, cost = seed_markdown(per_seed(tables), "push", "HER", [0, 1], "HER", ["moved", "cost"]).splitlines()[2:]
+    assert moved.split(" | ")[1] == "+100.0 / +10.0 / +5.0 / +2.0 / +1.0 / +0.5"
+    # 200 epochs of 45 s; six evaluations of 5 s: 30 s of 9000 s; seed 1: 120 epochs, none
+    assert cost == "| hours of epochs; the bias evaluations' share of them | 2.50 h; 0.33 % | 1.50 h; 0.00 % |"
 
 
 def test_unknown_rows_duplicate_or_missing_seeds_are_errors_that_say_so(tables):
