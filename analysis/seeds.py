@@ -29,7 +29,7 @@ CHECKPOINTS = {
     "relabel_rate": (1, 50, 100, 150, 200),
     "q_mean": (10, 50, 100, 200),
     "bias_real_mean": (1, 10, 20, 50, 100, 200),
-    "bias_moved_mean": (1, 10, 20, 50, 100, 200),  # empty where no hindsight pair had moved the object
+    "bias_moved_mean": (5, 20, 30, 50, 75, 100, 150, 200),  # empty where no hindsight pair had moved the object
     "share_real_success": (150,), "share_hindsight": (150,), "share_real_failure": (150,),
 }
 BIAS_1_50 = "bias_real_1_50"  # the real-goal bias averaged over epochs 1-50
@@ -98,7 +98,8 @@ SEED_ROWS = {
     "bias": SeedRow("critic bias on real goals at epoch 1 / 10 / 20 / 50 / 100 / 200; averaged over epochs 1-50",
                     tuple(checkpoint("bias_real_mean", epoch) for epoch in CHECKPOINTS["bias_real_mean"]),
                     "{:+.1f}".format, last=BIAS_1_50),
-    "moved": SeedRow("critic bias on hindsight goals the object was moved to, at epoch 1 / 10 / 20 / 50 / 100 / 200",
+    "moved": SeedRow("critic bias on hindsight goals the object was moved to, at epoch 5 / 20 / 30 / 50 / 75 / 100 / 150 "
+                     "/ 200",
                      tuple(checkpoint("bias_moved_mean", epoch) for epoch in CHECKPOINTS["bias_moved_mean"]),
                      "{:+.1f}".format),
     "rate": SeedRow("relabel rate at epoch 1 / 50 / 100 / 150 / 200; its mean over the 200 epochs",

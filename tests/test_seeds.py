@@ -75,7 +75,7 @@ def test_a_table_renders_a_column_per_seed_and_marks_what_a_run_lacks(tables):
     assert lines[5].split(" | ")[1] == "+100.0 / +10.0 / +5.0 / +2.0 / +1.0 / +0.5; +13.8"  # 675 / 49
     assert lines[5].endswith("| - / - / - / - / - / -; - |")  # seed 1 logged no bias
     moved, cost = seed_markdown(per_seed(tables), "push", "HER", [0, 1], "HER", ["moved", "cost"]).splitlines()[2:]
-    assert moved.split(" | ")[1] == "+100.0 / +10.0 / +5.0 / +2.0 / +1.0 / +0.5"
+    assert moved.split(" | ")[1] == "- / +5.0 / - / +2.0 / - / +1.0 / - / +0.5"  # evaluated at 20, 50, 100, 200
     # 200 epochs of 45 s; six evaluations of 5 s: 30 s of 9000 s; seed 1: 120 epochs, none
     assert cost == "| hours of epochs; the bias evaluations' share of them | 2.50 h; 0.33 % | 1.50 h; 0.00 % |"
 
