@@ -29,11 +29,14 @@ from servers import SlurmCluster, postgres_database, slurm_cluster, wait_until
 # One xdist worker runs them all: the SLURM cluster is started once per module and owns system paths.
 pytestmark = [pytest.mark.cluster, pytest.mark.xdist_group("servers")]
 
-# Tiny FetchReach runs: about 0.5 s per epoch on one core, so the kill lands part-way; no bias evaluation
-# (about 8 s each on FetchReach; tests/test_bias.py evaluates).
+# Tiny FetchReach runs: 0.1-0.5 s per epoch on one core; no bias evaluation (about 8 s each on FetchReach;
+# tests/test_bias.py evaluates). EPOCHS is long enough that a run caught in its first EARLY epochs is still
+# part-way after the kill lands (submitit's job trains on until SIGKILL, 2 s after scancel): at 16 epochs and
+# 4 early ones, a quiet machine finished the rest before it.
 TINY = ["task.cycles_per_epoch=2", "ddpg.batches_per_cycle=5", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
         "bias.epochs=[]"]
-EPOCHS = 16
+EPOCHS = 48
+EARLY = EPOCHS // 8
 COMMAND_TIMEOUT = 240  # seconds for one sweep or search command
 
 
@@ -96,7 +99,7 @@ def test_slurm_sweep_killed_part_way_resubmits_without_loss_or_repeats(slurm: Sl
             raise AssertionError(f"the sweep ended before the kill:\n{first_log.read_text()[-3000:]}")
         states = {run: RunFolder(run).state() for run in runs}
         early = [run for run, state in states.items()
-                 if state == "resumable" and len(read_run(run / "run.mcap").epochs) <= EPOCHS // 4]
+                 if state == "resumable" and len(read_run(run / "run.mcap").epochs) <= EARLY]
         return "complete" in states.values() and bool(early)
 
     try:
