@@ -3,7 +3,8 @@
 :func:`seed_values` makes one row per run (``tables/per_seed.csv`` of ``hersd-report``): its outcomes
 (:func:`analysis.metrics.run_outcomes`), its mean rate, and its logged values at the epochs of
 :data:`CHECKPOINTS` (column ``<field>_at_<epoch>``; empty where the run has not reached the epoch or did
-not log the field there), and its real-goal bias averaged over epochs 1-50 (:func:`analysis.critic.integrated_bias`).
+not log the field there), its real-goal bias averaged over epochs 1-50 (:func:`analysis.critic.integrated_bias`)
+and its cost (:func:`analysis.provenance.run_cost`).
 
 :func:`seed_markdown` renders some runs of one configuration as a table, a column per seed and a row
 per :data:`SEED_ROWS` entry, from that file alone: the tables of docs/RESULTS.md are its output,
