@@ -13,6 +13,9 @@ that decides it; :func:`claims_table` reads the measurement from the report's ow
   (twice the smaller one-sided p) is at least ALPHA, ``not reproduced: separated`` otherwise;
 - ``not reproduced: both final medians are 0`` (``neither median reaches <level>``) whatever p says, where
   neither configuration's median learns: two arms that both fail are not alike in the paper's sense;
+- ``too few seeds to test at n v m`` where even the most extreme split of the seeds could not reach
+  ALPHA (two-sided at 5 v 2: 2/21 = 0.095), with ``the arms as far apart as the seeds allow`` when p is
+  that smallest value: "not separated" would then say nothing about the claim;
 - ``not measured yet`` where either configuration lacks two complete seeds.
 
 The configurations are named by the schedule classes themselves (:func:`analysis.load.config_label`), so
@@ -108,6 +111,9 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     row |= {"test": _test_words(seeds, versus_seeds, two_sided), "p": p}
     if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
         return row | {"verdict": f"not reproduced: {failed} at {at}"}
+    if (smallest := smallest_p(seeds, versus_seeds, two_sided)) >= ALPHA:
+        apart = ": the arms as far apart as the seeds allow" if math.isclose(p, smallest) else ""
+        return row | {"verdict": f"too few seeds to test at {at}{apart}"}
     if claim.alike:
         return row | {"verdict": f"consistent: not separated at {at}" if p >= ALPHA else "not reproduced: separated"}
     if p_better < ALPHA and (direction or not two_sided):
@@ -130,13 +136,18 @@ def _neither_learns(statistic: str, value: float, versus_value: float) -> str | 
     return None
 
 
+def smallest_p(seeds: int, versus_seeds: int, two_sided: bool) -> float:
+    """The smallest p the permutation test can give: one split (two, two-sided) of all, or of the resamples + 1."""
+    splits = math.comb(seeds + versus_seeds, seeds)
+    return (2 if two_sided else 1) / (splits if splits <= PERMUTATION_RESAMPLES else PERMUTATION_RESAMPLES + 1)
+
+
 def _test_words(seeds: int, versus_seeds: int, two_sided: bool) -> str:
     """The permutation test's kind and power: exact when the splits number at most PERMUTATION_RESAMPLES."""
     splits = math.comb(seeds + versus_seeds, seeds)
-    exact = splits <= PERMUTATION_RESAMPLES
-    kind = "exact" if exact else f"{PERMUTATION_RESAMPLES} random splits of {splits}"
-    smallest = (2 if two_sided else 1) / (splits if exact else PERMUTATION_RESAMPLES + 1)
-    return f"permutation, {'two' if two_sided else 'one'}-sided, {kind} (smallest p possible {smallest:.2g})"
+    kind = "exact" if splits <= PERMUTATION_RESAMPLES else f"{PERMUTATION_RESAMPLES} random splits of {splits}"
+    return (f"permutation, {'two' if two_sided else 'one'}-sided, {kind} "
+            f"(smallest p possible {smallest_p(seeds, versus_seeds, two_sided):.2g})")
 
 
 def _measured(claim: Claim, summary: pd.DataFrame, bias_tests: pd.DataFrame):

@@ -36,10 +36,12 @@ PROVENANCE_COLUMNS = (
     "dirty",              # a session ran code with uncommitted changes
     "cpu", "threads", "flush_denormal",  # one value, or one per session where they differ
     "seconds_per_epoch",  # median wall-clock seconds of the run's epochs
-    "epoch_hours",        # the run's cost: wall-clock hours of its epochs, summed (epoch_seconds; bias evaluations apart)
+    "paced_hours",        # the run's cost: its epochs at their median pace (epochs_done x seconds_per_epoch), in hours
+    "epoch_hours",        # wall-clock hours of its epochs, summed (epoch_seconds; bias evaluations apart): with
+                          # whatever stopped or slowed the process (a paused campaign, other work on its cores)
     "bias_evaluations",   # epochs with a bias evaluation (hersd/engine/bias.py)
     "bias_seconds",       # their wall-clock seconds, summed (bias_seconds)
-    "bias_percent",       # bias_seconds as a percentage of the epochs' summed seconds (0 without evaluations)
+    "bias_percent",       # bias_seconds as a percentage of paced_hours (0 without evaluations)
     "first_date", "last_date",  # UTC: the first session's start, the log's last message's time
 )
 # the page's table: a run named by its task, configuration and seed (its folder the tooltip), then its
@@ -48,8 +50,8 @@ PAGE_COLUMNS = {"run": Column("run"), "epochs_done": Column("epochs done"), "ses
                 "resume_epochs": Column("resumed at epochs"), "commits": Column("commit per session"),
                 "dirty": Column("dirty"), "cpu": Column("CPU"), "threads": Column("threads"),
                 "flush_denormal": Column("flush denormals"), "seconds_per_epoch": RUN_COLUMNS["seconds_per_epoch"],
-                "epoch_hours": Column("hours of epochs", "{:.2f}"),
-                "bias_percent": Column("bias evaluations (% of epoch time)", "{:.2f}"),
+                "paced_hours": Column("hours at the median pace", "{:.2f}"),
+                "bias_percent": Column("bias evaluations (% of those hours)", "{:.2f}"),
                 "first_date": Column("first start (UTC)"), "last_date": Column("last log message (UTC)")}
 # the columns made from a run's sessions (_run_provenance)
 SESSION_CELLS = ("sessions", "resume_epochs", "commits", "dirty", *MAYBE_UNLOGGED, "first_date", "last_date")
@@ -124,15 +126,18 @@ def _run_provenance(sessions: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run_cost(epochs: pd.DataFrame) -> pd.DataFrame:
-    """Per run (index ``run``), from its logged epochs: ``seconds_per_epoch`` (median), ``epoch_hours``,
-    ``bias_evaluations``, ``bias_seconds`` and ``bias_percent`` (:data:`PROVENANCE_COLUMNS`)."""
+    """Per run (index ``run``), from its logged epochs: ``seconds_per_epoch`` (median), ``paced_hours``,
+    ``epoch_hours``, ``bias_evaluations``, ``bias_seconds`` and ``bias_percent`` (:data:`PROVENANCE_COLUMNS`). The
+    median pace is the cost a reader can plan with: a paused process adds its pause to the epoch under way
+    (wall-clock ``epoch_seconds``), which the sum keeps and the median ignores."""
     grouped = epochs.groupby("run")
     cost = pd.DataFrame({"seconds_per_epoch": grouped["epoch_seconds"].median(),
-                         "epoch_seconds": grouped["epoch_seconds"].sum(),
+                         "epoch_seconds": grouped["epoch_seconds"].sum(), "epochs": grouped.size(),
                          "bias_evaluations": grouped["bias_seconds"].count(),
                          "bias_seconds": grouped["bias_seconds"].sum()})  # sum of none: 0
-    return cost.assign(epoch_hours=cost["epoch_seconds"] / 3600,
-                       bias_percent=100 * cost["bias_seconds"] / cost["epoch_seconds"]).drop(columns="epoch_seconds")
+    paced = cost["epochs"] * cost["seconds_per_epoch"]
+    return cost.assign(paced_hours=paced / 3600, epoch_hours=cost["epoch_seconds"] / 3600,
+                       bias_percent=100 * cost["bias_seconds"] / paced).drop(columns=["epoch_seconds", "epochs"])
 
 
 def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.DataFrame) -> pd.DataFrame:
@@ -178,7 +183,7 @@ def provenance_html(table: pd.DataFrame) -> list[str]:
     return ["<h2>Provenance of the runs</h2>",
             '<details class="provenance"><summary>Per run, from its log: the commit of each session (-dirty: with '
             "uncommitted changes), the CPU, threads and flush_denormal setting, the epochs it was resumed at, its "
-            "seconds per epoch, hours of epochs, the bias evaluations' share of them and dates (click to open; all "
+            "seconds per epoch, hours of epochs at that pace, the bias evaluations' share of them and dates (click to open; all "
             'columns in <a href="tables/runs_provenance.csv">tables/runs_provenance.csv</a>)</summary>'
             + (f"<p>{html.escape(note)}</p>" if note else "")
             + html_table(shown, columns=PAGE_COLUMNS, titles={"run": table["folder"]}) + "</details>"]

@@ -62,10 +62,10 @@ COLUMNS: dict[str, Column] = {
     # the decay against the constant rate at the same mu_eps, a variant against its defaults (analysis.metrics)
     "variant": Column("variant"),
     "outcome": Column("outcome (per seed)"),
-    "config_mean": Column("configuration: mean over seeds", MIXED),
+    "config_mean": Column("mean over its seeds", MIXED),
     "versus_mean": Column("versus: mean over seeds", MIXED),
-    "p_config_better": Column("p: the configuration does better", SMALL_P),
-    "p_versus_better": Column("p: the versus configuration does better", SMALL_P),
+    "p_config_better": Column("p: it does better", SMALL_P),
+    "p_versus_better": Column("p: versus does better", SMALL_P),
     "splits": Column("splits of the seeds"),
     "smallest_p": Column("smallest p the seeds allow", SMALL_P),
     "epoch": Column("epoch", EPOCHS),

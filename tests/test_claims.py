@@ -71,6 +71,19 @@ def test_two_arms_that_both_fail_are_not_reproduced_whatever_p_says():
     assert row["verdict"] == "not reproduced: neither median reaches 0.9 at 5 v 5" and "never" in row["hersd"]
 
 
+def test_seeds_too_few_for_the_test_to_reach_alpha_say_so_not_not_separated():
+    two = summary_table(100, 140).assign(seeds=[5, 5, 2])  # the control: 2 seeds; two-sided smallest p 2/21
+    table = permutation_table(0.01, 0.99)
+    table.loc[table["config"] == LINEAR_025, "p_epochs_to_0.9"] = [0.01, 1 / 21]  # v HER; v the control: extreme
+    row = claims_table(two, table, NO_BIAS, (ALIKE,)).iloc[0]
+    assert row["p"] == pytest.approx(2 / 21) and row["seeds"] == "5 v 2"
+    assert row["verdict"] == "too few seeds to test at 5 v 2: the arms as far apart as the seeds allow"
+    table.loc[table["config"] == LINEAR_025, "p_epochs_to_0.9"] = [0.01, 0.3]
+    assert claims_table(two, table, NO_BIAS, (ALIKE,)).iloc[0]["verdict"] == "too few seeds to test at 5 v 2"
+    three = two.assign(seeds=[5, 5, 3])  # two-sided smallest p 2/56 = 0.036: testable
+    assert claims_table(three, table, NO_BIAS, (ALIKE,)).iloc[0]["verdict"] == "consistent: not separated at 5 v 3"
+
+
 def test_too_few_seeds_is_not_measured_and_a_task_without_runs_has_no_rows():
     row = claims_table(summary_table(100, 140, seeds=1), permutation_table(0.01, 0.99), NO_BIAS, (FASTER,)).iloc[0]
     assert row["verdict"] == "not measured yet" and np.isnan(row["p"])

@@ -77,7 +77,8 @@ def test_a_table_renders_a_column_per_seed_and_marks_what_a_run_lacks(tables):
     moved, cost = seed_markdown(per_seed(tables), "push", "HER", [0, 1], "HER", ["moved", "cost"]).splitlines()[2:]
     assert moved.split(" | ")[1] == "- / +5.0 / - / +2.0 / - / +1.0 / - / +0.5"  # evaluated at 20, 50, 100, 200
     # 200 epochs of 45 s; six evaluations of 5 s: 30 s of 9000 s; seed 1: 120 epochs, none
-    assert cost == "| hours of epochs; the bias evaluations' share of them | 2.50 h; 0.33 % | 1.50 h; 0.00 % |"
+    assert cost == ("| hours of epochs at the median pace / wall clock; the bias evaluations' share of the first "
+                    "| 2.50 h / 2.50 h; 0.33 % | 1.50 h / 1.50 h; 0.00 % |")
 
 
 def test_unknown_rows_duplicate_or_missing_seeds_are_errors_that_say_so(tables):
