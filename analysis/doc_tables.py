@@ -97,7 +97,8 @@ def render(text: str, tables: Path) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m analysis.doc_tables", description=__doc__.split("\n")[0])
     parser.add_argument("files", nargs="+", type=Path, help="markdown files with generated blocks")
-    parser.add_argument("--tables", type=Path, default=DEFAULT_TABLES, help=f"the report's tables (default {DEFAULT_TABLES})")
+    parser.add_argument("--tables", type=Path, default=DEFAULT_TABLES,
+                        help=f"the report's tables (default {DEFAULT_TABLES})")
     parser.add_argument("--check", action="store_true", help="rewrite nothing; exit 1 if a block is stale")
     args = parser.parse_args(argv)
     stale = []

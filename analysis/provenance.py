@@ -183,7 +183,7 @@ def provenance_html(table: pd.DataFrame) -> list[str]:
     return ["<h2>Provenance of the runs</h2>",
             '<details class="provenance"><summary>Per run, from its log: the commit of each session (-dirty: with '
             "uncommitted changes), the CPU, threads and flush_denormal setting, the epochs it was resumed at, its "
-            "seconds per epoch, hours of epochs at that pace, the bias evaluations' share of them and dates (click to open; all "
-            'columns in <a href="tables/runs_provenance.csv">tables/runs_provenance.csv</a>)</summary>'
+            "seconds per epoch, hours of epochs at that pace, the bias evaluations' share of them and dates (click "
+            'to open; all columns in <a href="tables/runs_provenance.csv">tables/runs_provenance.csv</a>)</summary>'
             + (f"<p>{html.escape(note)}</p>" if note else "")
             + html_table(shown, columns=PAGE_COLUMNS, titles={"run": table["folder"]}) + "</details>"]

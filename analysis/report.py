@@ -14,7 +14,7 @@ Output (``<FOLDER>/report`` unless ``--out``)::
                                  the defaults, both directions
     tables/runs.csv              the runs behind them
     tables/runs_provenance.csv|.md  per run, from its log: commits, machine, threads, flush setting, resumes, dates,
-                                 hours of epochs and the bias evaluations' share of them
+                                 hours of epochs at their median pace and wall clock, the bias evaluations' share
     tables/bias_evaluations.csv  per run, every bias evaluation its log holds (epoch, bias per goal type, seconds)
     tables/per_seed.csv          per run, its outcomes and its values at fixed epochs (analysis.seeds): the
                                  per-seed tables of docs/RESULTS.md
@@ -47,7 +47,7 @@ from analysis.claims import claims_table
 from analysis.critic import GOAL_TYPES, bias_evaluations, bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
 from analysis.metrics import GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
-from analysis.provenance import provenance_html, provenance_table
+from analysis.provenance import provenance_html, provenance_table, run_cost
 from analysis.seeds import seed_values
 from analysis.studies import StudyStorage, open_study_storage
 from hersd.contract.study import StudyStorageError, find_study_storages
@@ -370,7 +370,7 @@ def _runs_html(analysis: Analysis) -> list[str]:
     """The page's run list: per task x configuration a collapsed ``<details>`` whose summary line counts its runs
     and gives its median final success, and whose table has one row per run (RUN_PAGE_COLUMNS)."""
     runs = _run_list(analysis)
-    seconds = analysis.epochs.groupby("run")["epoch_seconds"].median().rename("seconds_per_epoch")
+    seconds = run_cost(analysis.epochs)["seconds_per_epoch"]
     runs = runs.merge(seconds, left_on="run", right_index=True, how="left").assign(
         run_folder=[Path(path).parent.name for path in runs["path"]],
         state=[run_state_words(*values) for values in

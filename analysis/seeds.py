@@ -100,8 +100,8 @@ SEED_ROWS = {
     "bias": SeedRow("critic bias on real goals at epoch 1 / 10 / 20 / 50 / 100 / 200; averaged over epochs 1-50",
                     tuple(checkpoint("bias_real_mean", epoch) for epoch in CHECKPOINTS["bias_real_mean"]),
                     "{:+.1f}".format, last=BIAS_1_50),
-    "moved": SeedRow("critic bias on hindsight goals the object was moved to, at epoch 5 / 20 / 30 / 50 / 75 / 100 / 150 "
-                     "/ 200",
+    "moved": SeedRow("critic bias on hindsight goals the object was moved to, at epoch 5 / 20 / 30 / 50 / 75 / 100 / "
+                     "150 / 200",
                      tuple(checkpoint("bias_moved_mean", epoch) for epoch in CHECKPOINTS["bias_moved_mean"]),
                      "{:+.1f}".format),
     "rate": SeedRow("relabel rate at epoch 1 / 50 / 100 / 150 / 200; its mean over the 200 epochs",

@@ -65,7 +65,8 @@ def test_each_runs_values_are_read_at_their_epochs(tables):
 
 
 def test_a_table_renders_a_column_per_seed_and_marks_what_a_run_lacks(tables):
-    markdown = seed_markdown(per_seed(tables), "push", "HER", [0, 1], "HER", ["smoothed", "smoothed_epochs", "q", "bias"])
+    rows = ["smoothed", "smoothed_epochs", "q", "bias"]
+    markdown = seed_markdown(per_seed(tables), "push", "HER", [0, 1], "HER", rows)
     lines = markdown.splitlines()
     assert lines[0] == "| | HER seed 0 | HER seed 1 |" and lines[1] == "| --- | --- | --- |"
     smoothed = lines[2].split(" | ")
