@@ -9,7 +9,10 @@ as it is. Kinds (the opening comment's first word):
   figure, verdict, p and seeds (README.md's opening);
 - ``<!-- seeds task=T config="C" seeds=0-4 name=N rows=smoothed,raw_epochs -->`` ... ``<!-- /seeds -->``:
   a per-seed table of ``per_seed.csv`` (:func:`analysis.seeds.seed_markdown`; ``seeds`` a range ``a-b`` or a
-  list ``0,2,3``; ``rows`` keys of :data:`analysis.seeds.SEED_ROWS`).
+  list ``0,2,3``; ``rows`` keys of :data:`analysis.seeds.SEED_ROWS`);
+- ``<!-- versus task=T config="C" versus="V" name=N versus_name=M -->`` ... ``<!-- /versus -->``: two
+  configurations side by side, their medians (``summary.csv``) and both one-sided permutation tests of the
+  seeds' means (``permutation_tests.csv``), with the test's power (:func:`versus_markdown`).
 
 ``--check`` rewrites nothing and exits 1 naming each file whose blocks differ from what the tables give
 (the tests run it on docs/RESULTS.md and README.md against the committed report). Bad input (a missing
@@ -28,12 +31,12 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.claims import claims_markdown
+from analysis.claims import claims_markdown, test_words
 from analysis.seeds import seed_markdown
 from hersd.contract.tasks import task_title
 
 DEFAULT_TABLES = Path("results/report/tables")
-BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
+BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
 
 
 class DocTablesError(ValueError):
@@ -68,14 +71,19 @@ def _seeds(words: str) -> list[int]:
     raise DocTablesError(f"seeds={words!r}: give a range like 0-4 or a list like 0,2,3")
 
 
-def _seed_block(options: str, tables: Path) -> str:
+def _settings(kind: str, options: str, needed: Sequence[str]) -> dict[str, str]:
+    """A block's ``key=value`` options, each of ``needed`` present."""
     try:
         settings = dict(part.split("=", 1) for part in shlex.split(options))
     except ValueError:
-        raise DocTablesError(f"seeds block {options.strip()!r}: write key=value pairs (quote a value with spaces)")
-    needed = ("task", "config", "seeds", "name", "rows")
+        raise DocTablesError(f"{kind} block {options.strip()!r}: write key=value pairs (quote a value with spaces)")
     if missing := [key for key in needed if key not in settings]:
-        raise DocTablesError(f"seeds block {options.strip()!r} lacks {', '.join(missing)}")
+        raise DocTablesError(f"{kind} block {options.strip()!r} lacks {', '.join(missing)}")
+    return settings
+
+
+def _seed_block(options: str, tables: Path) -> str:
+    settings = _settings("seeds", options, ("task", "config", "seeds", "name", "rows"))
     try:
         return seed_markdown(read_table(tables, "per_seed"), settings["task"], settings["config"],
                              _seeds(settings["seeds"]), settings["name"], settings["rows"].split(","))
@@ -83,12 +91,64 @@ def _seed_block(options: str, tables: Path) -> str:
         raise DocTablesError(f"seeds block {options.strip()!r}: {error}") from None
 
 
+# summary.csv column(s) -> the row's words and the permutation test's outcome(s); epochs ``never`` where missing
+VERSUS_ROWS = (
+    ("median final smoothed test success", ("final_median",), ("final",)),
+    ("epoch the median smoothed curve reaches 0.5 / 0.9", ("epochs_to_0.5", "epochs_to_0.9"),
+     ("epochs_to_0.5", "epochs_to_0.9")),
+    ("epoch the median raw curve reaches 0.5 / 0.9", ("raw_epochs_to_0.5", "raw_epochs_to_0.9"),
+     ("raw_epochs_to_0.5", "raw_epochs_to_0.9")),
+    ("area under the median smoothed curve (AUC)", ("auc",), ()),
+)
+
+
+def versus_markdown(summary: pd.DataFrame, tests: pd.DataFrame, task: str, config: str, versus: str, name: str,
+                    versus_name: str) -> str:
+    """``config`` (shown as ``name``) beside ``versus`` on ``task``: a row per VERSUS_ROWS entry with each side's
+    median (``summary``: summary.csv) and the one-sided p of each doing better (``tests``: permutation_tests.csv,
+    the seeds' means; ``-`` for a row without a test), then a line with the test's kind and power. Raises
+    ValueError when either configuration lacks complete seeds to test."""
+    def row_of(table: pd.DataFrame, **match: str) -> pd.Series:
+        chosen = table[np.logical_and.reduce([table[key] == value for key, value in match.items()])]
+        if len(chosen) != 1:
+            raise ValueError(f"{config!r} against {versus!r} on {task}: not in the report's tables (each needs "
+                             "two complete seeds)")
+        return chosen.iloc[0]
+
+    sides = [row_of(summary, task=task, config=side) for side in (config, versus)]
+    p_better = [row_of(tests, task=task, config=one, versus=other) for one, other in ((config, versus), (versus, config))]
+    seeds, versus_seeds = int(p_better[0]["seeds"]), int(p_better[0]["versus_seeds"])
+
+    def shown(values: pd.Series, columns: Sequence[str]) -> str:
+        return " / ".join(("never" if pd.isna(values[column]) else f"{int(values[column])}") if "epochs" in column
+                          else f"{values[column]:.3f}" for column in columns)
+
+    lines = [f"| | {name}, {seeds} seeds | {versus_name}, {versus_seeds} seeds | one-sided p: {name} does better | "
+             f"one-sided p: {versus_name} does better |", "| --- " * 5 + "|"]
+    for words, columns, outcomes in VERSUS_ROWS:
+        p_cells = [" / ".join(f"{side[f'p_{outcome}']:.2g}" for outcome in outcomes) or "-" for side in p_better]
+        lines.append(f"| {words} | {shown(sides[0], columns)} | {shown(sides[1], columns)} | {' | '.join(p_cells)} |")
+    return "\n".join(lines) + (f"\n\nThe p-values: {test_words(seeds, versus_seeds, two_sided=False)}, of the "
+                               f"difference of the seeds' means (an epoch never reached counted as K + 1).\n")
+
+
+def _versus_block(options: str, tables: Path) -> str:
+    settings = _settings("versus", options, ("task", "config", "versus", "name", "versus_name"))
+    try:
+        return versus_markdown(read_table(tables, "summary"), read_table(tables, "permutation_tests"),
+                               settings["task"], settings["config"], settings["versus"], settings["name"],
+                               settings["versus_name"])
+    except ValueError as error:
+        raise DocTablesError(f"versus block {options.strip()!r}: {error}") from None
+
+
 def render(text: str, tables: Path) -> str:
     """``text`` with every block rewritten from the tables in ``tables``."""
     def block(match: re.Match) -> str:
         opening, kind, options, _, closing = match.groups()
         body = (claims_markdown(_claims(tables)) if kind == "claims" else claims_list(_claims(tables))
-                if kind == "claims-list" else _seed_block(options, tables))
+                if kind == "claims-list" else _versus_block(options, tables) if kind == "versus"
+                else _seed_block(options, tables))
         return opening + body + closing
 
     return BLOCK.sub(block, text)

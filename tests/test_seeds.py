@@ -137,3 +137,40 @@ def test_the_committed_docs_blocks_are_what_the_committed_report_gives():
     assert text.count("<!-- seeds ") >= 4 and "<!-- claims-list" in (ROOT / "README.md").read_text(encoding="utf-8")
     assert doc_tables(["--check", "--tables", str(ROOT / "results/report/tables"), str(ROOT / "docs/RESULTS.md"),
                        str(ROOT / "README.md")]) == 0
+
+
+def versus_tables(folder: Path) -> Path:
+    """summary.csv and permutation_tests.csv of two arms on push, made by hand: linear 0.5 (3 seeds) and HER (2)."""
+    pd.DataFrame({"task": ["push", "push"], "config": ["linear b1=0.5", "HER"], "final_median": [0.9125, 0.5],
+                  "auc": [0.61, 0.4], "epochs_to_0.5": [80, 150], "epochs_to_0.9": [190, np.nan],
+                  "raw_epochs_to_0.5": [40, 101], "raw_epochs_to_0.9": [np.nan, np.nan]}).to_csv(
+        folder / "summary.csv", index=False)
+    pd.DataFrame({"task": ["push", "push"], "config": ["linear b1=0.5", "HER"], "versus": ["HER", "linear b1=0.5"],
+                  "seeds": [3, 2], "versus_seeds": [2, 3], "p_final": [0.1, 0.95], "p_epochs_to_0.5": [0.1, 1.0],
+                  "p_epochs_to_0.9": [0.3, 0.8], "p_raw_epochs_to_0.5": [0.2, 0.9],
+                  "p_raw_epochs_to_0.9": [1.0, 1.0]}).to_csv(folder / "permutation_tests.csv", index=False)
+    return folder
+
+
+def test_a_versus_block_shows_both_medians_both_one_sided_ps_and_the_power(tmp_path):
+    doc = tmp_path / "doc.md"
+    doc.write_text('<!-- versus task=push config="linear b1=0.5" versus=HER name=linear versus_name=HER -->\n'
+                   "<!-- /versus -->\n", encoding="utf-8")
+    assert doc_tables(["--tables", str(versus_tables(tmp_path)), str(doc)]) == 0
+    lines = doc.read_text().splitlines()
+    assert lines[1] == ("| | linear, 3 seeds | HER, 2 seeds | one-sided p: linear does better | "
+                        "one-sided p: HER does better |")
+    assert lines[3] == "| median final smoothed test success | 0.912 | 0.500 | 0.1 | 0.95 |"
+    assert lines[4] == "| epoch the median smoothed curve reaches 0.5 / 0.9 | 80 / 190 | 150 / never | 0.1 / 0.3 | 1 / 0.8 |"
+    assert lines[5] == "| epoch the median raw curve reaches 0.5 / 0.9 | 40 / never | 101 / never | 0.2 / 1 | 0.9 / 1 |"
+    assert lines[6] == "| area under the median smoothed curve (AUC) | 0.610 | 0.400 | - | - |"
+    assert "exact (smallest p possible 0.1)" in lines[8]  # C(5, 2) = 10 splits
+
+
+def test_a_versus_block_without_both_arms_is_one_line_and_exit_2(tmp_path, capsys):
+    doc = tmp_path / "doc.md"
+    text = '<!-- versus task=push config="linear b1=0.5" versus=ARCHER name=linear versus_name=ARCHER -->\nold\n<!-- /versus -->\n'
+    doc.write_text(text, encoding="utf-8")
+    assert doc_tables(["--tables", str(versus_tables(tmp_path)), str(doc)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'linear b1=0.5' against 'ARCHER' on push" in err and doc.read_text() == text
