@@ -12,7 +12,11 @@ as it is. Kinds (the opening comment's first word):
   list ``0,2,3``; ``rows`` keys of :data:`analysis.seeds.SEED_ROWS`);
 - ``<!-- versus task=T config="C" versus="V" name=N versus_name=M -->`` ... ``<!-- /versus -->``: two
   configurations side by side, their medians (``summary.csv``) and both one-sided permutation tests of the
-  seeds' means (``permutation_tests.csv``), with the test's power (:func:`versus_markdown`).
+  seeds' means (``permutation_tests.csv``), with the test's power (:func:`versus_markdown`);
+- ``<!-- table name=equal_mu_tests task=T columns=outcome,p_config_better -->`` ... ``<!-- /table -->``: the
+  rows of a report table (``tables/<name>.csv``) whose columns equal the block's other settings (here
+  ``task``), its ``columns`` (default: all but those matched) under the report page's headers and number
+  formats (:func:`report_table_markdown`).
 
 ``--check`` rewrites nothing and exits 1 naming each file whose blocks differ from what the tables give
 (the tests run it on docs/RESULTS.md and README.md against the committed report). Bad input (a missing
@@ -33,10 +37,11 @@ import pandas as pd
 
 from analysis.claims import claims_markdown, test_words
 from analysis.seeds import seed_markdown
+from analysis.tables import COLUMNS, FLOAT_FORMAT, cell_text, column_header
 from hersd.contract.tasks import task_title
 
 DEFAULT_TABLES = Path("results/report/tables")
-BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
+BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus|table)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
 
 
 class DocTablesError(ValueError):
@@ -128,8 +133,8 @@ def versus_markdown(summary: pd.DataFrame, tests: pd.DataFrame, task: str, confi
     for words, columns, outcomes in VERSUS_ROWS:
         p_cells = [" / ".join(f"{side[f'p_{outcome}']:.2g}" for outcome in outcomes) or "-" for side in p_better]
         lines.append(f"| {words} | {shown(sides[0], columns)} | {shown(sides[1], columns)} | {' | '.join(p_cells)} |")
-    return "\n".join(lines) + (f"\n\nThe p-values: {test_words(seeds, versus_seeds, two_sided=False)}, of the "
-                               f"difference of the seeds' means (an epoch never reached counted as K + 1).\n")
+    return "\n".join(lines) + (f"\n\np-values: {test_words(seeds, versus_seeds, two_sided=False)}, on the "
+                               f"difference of the seeds' means (an epoch never reached counts as K + 1).\n")
 
 
 def _versus_block(options: str, tables: Path) -> str:
@@ -142,13 +147,41 @@ def _versus_block(options: str, tables: Path) -> str:
         raise DocTablesError(f"versus block {options.strip()!r}: {error}") from None
 
 
+def report_table_markdown(table: pd.DataFrame, match: dict[str, str], columns: Sequence[str] | None = None) -> str:
+    """The rows of ``table`` whose columns named in ``match`` hold its values (compared as text), as markdown:
+    ``columns`` (default: every column not in ``match``) under :func:`analysis.tables.column_header`, numbers at
+    their column's format. Raises ValueError for an unknown column or when no row matches."""
+    unknown = [name for name in (*match, *(columns or ())) if name not in table.columns]
+    if unknown:
+        raise ValueError(f"no column {', '.join(unknown)}; the table has {', '.join(table.columns)}")
+    chosen = table[np.logical_and.reduce([table[key].astype(str) == value for key, value in match.items()])
+                   if match else np.ones(len(table), bool)]
+    if chosen.empty:
+        raise ValueError(f"no row with {', '.join(f'{key}={value}' for key, value in match.items())}")
+    shown = list(columns) if columns else [name for name in table.columns if name not in match]
+    formats = [(COLUMNS[name].number if name in COLUMNS else None) or FLOAT_FORMAT for name in shown]
+    lines = ["| " + " | ".join(column_header(name) for name in shown) + " |", "| --- " * len(shown) + "|"]
+    lines += ["| " + " | ".join(cell_text(value, form) for value, form in zip(row, formats)) + " |"
+              for row in chosen[shown].itertuples(index=False)]
+    return "\n".join(lines) + "\n"
+
+
+def _table_block(options: str, tables: Path) -> str:
+    settings = _settings("table", options, ("name",))
+    name, columns = settings.pop("name"), settings.pop("columns", None)
+    try:
+        return report_table_markdown(read_table(tables, name), settings, columns.split(",") if columns else None)
+    except ValueError as error:
+        raise DocTablesError(f"table block {options.strip()!r}: {error}") from None
+
+
 def render(text: str, tables: Path) -> str:
     """``text`` with every block rewritten from the tables in ``tables``."""
     def block(match: re.Match) -> str:
         opening, kind, options, _, closing = match.groups()
         body = (claims_markdown(_claims(tables)) if kind == "claims" else claims_list(_claims(tables))
                 if kind == "claims-list" else _versus_block(options, tables) if kind == "versus"
-                else _seed_block(options, tables))
+                else _table_block(options, tables) if kind == "table" else _seed_block(options, tables))
         return opening + body + closing
 
     return BLOCK.sub(block, text)

@@ -174,3 +174,36 @@ def test_a_versus_block_without_both_arms_is_one_line_and_exit_2(tmp_path, capsy
     assert doc_tables(["--tables", str(versus_tables(tmp_path)), str(doc)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'linear b1=0.5' against 'ARCHER' on push" in err and doc.read_text() == text
+
+
+def test_a_table_block_shows_the_matching_rows_under_the_pages_headers_and_formats(tmp_path):
+    pd.DataFrame({"task": ["push", "push", "slide"], "outcome": ["final", "epochs_to_0.5", "final"],
+                  "config_mean": [0.98291, 85.5, 0.1], "p_config_better": [0.0912421, 0.00033, 0.5]}).to_csv(
+        tmp_path / "equal_mu_tests.csv", index=False)
+    doc = tmp_path / "doc.md"
+    doc.write_text("<!-- table name=equal_mu_tests task=push -->\n<!-- /table -->\n"
+                   "<!-- table name=equal_mu_tests task=slide columns=p_config_better -->\n<!-- /table -->\n",
+                   encoding="utf-8")
+    assert doc_tables(["--tables", str(tmp_path), str(doc)]) == 0
+    assert doc.read_text().splitlines() == [
+        "<!-- table name=equal_mu_tests task=push -->",
+        "| outcome (per seed) | mean over its seeds | p: it does better |", "| --- | --- | --- |",
+        "| final | 0.9829 | 0.091 |", "| epochs_to_0.5 | 85.5 | 0.00033 |", "<!-- /table -->",
+        "<!-- table name=equal_mu_tests task=slide columns=p_config_better -->",
+        "| p: it does better |", "| --- |", "| 0.5 |", "<!-- /table -->"]
+
+
+@pytest.mark.parametrize("block, words", [
+    ("<!-- table name=equal_mu_tests task=reach -->", "no row with task=reach"),
+    ("<!-- table name=equal_mu_tests task=push columns=nope -->", "no column nope"),
+    ("<!-- table name=absent task=push -->", "absent.csv does not exist"),
+    ("<!-- table task=push -->", "lacks name"),
+])
+def test_a_bad_table_block_is_one_line_and_exit_2(tmp_path, capsys, block, words):
+    pd.DataFrame({"task": ["push"], "outcome": ["final"]}).to_csv(tmp_path / "equal_mu_tests.csv", index=False)
+    doc = tmp_path / "doc.md"
+    text = f"{block}\nold\n<!-- /table -->\n"
+    doc.write_text(text, encoding="utf-8")
+    assert doc_tables(["--tables", str(tmp_path), str(doc)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err and doc.read_text() == text
