@@ -108,7 +108,7 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     else:
         p_better, p_worse = _one_sided(claim, tests)
         p = min(1.0, 2 * min(p_better, p_worse)) if two_sided else p_better
-    row |= {"test": test_words(seeds, versus_seeds, two_sided), "p": p}
+    row |= {"test": permutation_words(seeds, versus_seeds, two_sided), "p": p}
     if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
         return row | {"verdict": f"not reproduced: {failed} at {at}"}
     if (smallest := smallest_p(seeds, versus_seeds, two_sided)) >= ALPHA:
@@ -142,7 +142,7 @@ def smallest_p(seeds: int, versus_seeds: int, two_sided: bool) -> float:
     return (2 if two_sided else 1) / (splits if splits <= PERMUTATION_RESAMPLES else PERMUTATION_RESAMPLES + 1)
 
 
-def test_words(seeds: int, versus_seeds: int, two_sided: bool) -> str:
+def permutation_words(seeds: int, versus_seeds: int, two_sided: bool) -> str:
     """The permutation test's kind and power: exact when the splits number at most PERMUTATION_RESAMPLES."""
     splits = math.comb(seeds + versus_seeds, seeds)
     kind = "exact" if splits <= PERMUTATION_RESAMPLES else f"{PERMUTATION_RESAMPLES} random splits of {splits}"

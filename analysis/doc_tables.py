@@ -35,7 +35,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.claims import claims_markdown, test_words
+from analysis.claims import claims_markdown, permutation_words
 from analysis.seeds import seed_markdown
 from analysis.tables import COLUMNS, FLOAT_FORMAT, cell_text, column_header
 from hersd.contract.tasks import task_title
@@ -133,7 +133,7 @@ def versus_markdown(summary: pd.DataFrame, tests: pd.DataFrame, task: str, confi
     for words, columns, outcomes in VERSUS_ROWS:
         p_cells = [" / ".join(f"{side[f'p_{outcome}']:.2g}" for outcome in outcomes) or "-" for side in p_better]
         lines.append(f"| {words} | {shown(sides[0], columns)} | {shown(sides[1], columns)} | {' | '.join(p_cells)} |")
-    return "\n".join(lines) + (f"\n\np-values: {test_words(seeds, versus_seeds, two_sided=False)}, on the "
+    return "\n".join(lines) + (f"\n\np-values: {permutation_words(seeds, versus_seeds, two_sided=False)}, on the "
                                f"difference of the seeds' means (an epoch never reached counts as K + 1).\n")
 
 
