@@ -13,7 +13,7 @@ as it is. Kinds (the opening comment's first word):
 - ``<!-- versus task=T config="C" versus="V" name=N versus_name=M -->`` ... ``<!-- /versus -->``: two
   configurations side by side, their medians (``summary.csv``) and both one-sided permutation tests of the
   seeds' means (``permutation_tests.csv``), with the test's power (:func:`versus_markdown`);
-- ``<!-- table name=equal_mu_tests task=T columns=outcome,p_config_better -->`` ... ``<!-- /table -->``: the
+- ``<!-- rows name=equal_mu_tests task=T columns=outcome,p_config_better -->`` ... ``<!-- /rows -->``: the
   rows of a report table (``tables/<name>.csv``) whose columns equal the block's other settings (here
   ``task``), its ``columns`` (default: all but those matched) under the report page's headers and number
   formats (:func:`report_table_markdown`).
@@ -41,7 +41,7 @@ from analysis.tables import COLUMNS, FLOAT_FORMAT, cell_text, column_header
 from hersd.contract.tasks import task_title
 
 DEFAULT_TABLES = Path("results/report/tables")
-BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus|table)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
+BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus|rows)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
 
 
 class DocTablesError(ValueError):
@@ -166,13 +166,13 @@ def report_table_markdown(table: pd.DataFrame, match: dict[str, str], columns: S
     return "\n".join(lines) + "\n"
 
 
-def _table_block(options: str, tables: Path) -> str:
-    settings = _settings("table", options, ("name",))
+def _rows_block(options: str, tables: Path) -> str:
+    settings = _settings("rows", options, ("name",))
     name, columns = settings.pop("name"), settings.pop("columns", None)
     try:
         return report_table_markdown(read_table(tables, name), settings, columns.split(",") if columns else None)
     except ValueError as error:
-        raise DocTablesError(f"table block {options.strip()!r}: {error}") from None
+        raise DocTablesError(f"rows block {options.strip()!r}: {error}") from None
 
 
 def render(text: str, tables: Path) -> str:
@@ -181,7 +181,7 @@ def render(text: str, tables: Path) -> str:
         opening, kind, options, _, closing = match.groups()
         body = (claims_markdown(_claims(tables)) if kind == "claims" else claims_list(_claims(tables))
                 if kind == "claims-list" else _versus_block(options, tables) if kind == "versus"
-                else _table_block(options, tables) if kind == "table" else _seed_block(options, tables))
+                else _rows_block(options, tables) if kind == "rows" else _seed_block(options, tables))
         return opening + body + closing
 
     return BLOCK.sub(block, text)

@@ -153,21 +153,21 @@ def test_a_versus_block_shows_both_medians_both_one_sided_ps_and_the_power(tmp_p
     assert "exact (smallest p possible 0.1)" in lines[8]  # C(5, 2) = 10 splits
 
 
-def test_a_table_block_shows_the_matching_rows_under_the_pages_headers_and_formats(tmp_path):
+def test_a_rows_block_shows_the_matching_rows_under_the_pages_headers_and_formats(tmp_path):
     pd.DataFrame({"task": ["push", "push", "slide"], "outcome": ["final", "epochs_to_0.5", "final"],
                   "config_mean": [0.98291, 85.5, 0.1], "p_config_better": [0.0912421, 0.00033, 0.5]}).to_csv(
         tmp_path / "equal_mu_tests.csv", index=False)
     doc = tmp_path / "doc.md"
-    doc.write_text("<!-- table name=equal_mu_tests task=push -->\n<!-- /table -->\n"
-                   "<!-- table name=equal_mu_tests task=slide columns=p_config_better -->\n<!-- /table -->\n",
+    doc.write_text("<!-- rows name=equal_mu_tests task=push -->\n<!-- /rows -->\n"
+                   "<!-- rows name=equal_mu_tests task=slide columns=p_config_better -->\n<!-- /rows -->\n",
                    encoding="utf-8")
     assert doc_tables(["--tables", str(tmp_path), str(doc)]) == 0
     assert doc.read_text().splitlines() == [
-        "<!-- table name=equal_mu_tests task=push -->",
+        "<!-- rows name=equal_mu_tests task=push -->",
         "| outcome (per seed) | mean over its seeds | p: it does better |", "| --- | --- | --- |",
-        "| final | 0.9829 | 0.091 |", "| epochs_to_0.5 | 85.5 | 0.00033 |", "<!-- /table -->",
-        "<!-- table name=equal_mu_tests task=slide columns=p_config_better -->",
-        "| p: it does better |", "| --- |", "| 0.5 |", "<!-- /table -->"]
+        "| final | 0.9829 | 0.091 |", "| epochs_to_0.5 | 85.5 | 0.00033 |", "<!-- /rows -->",
+        "<!-- rows name=equal_mu_tests task=slide columns=p_config_better -->",
+        "| p: it does better |", "| --- |", "| 0.5 |", "<!-- /rows -->"]
 
 
 @pytest.mark.parametrize("block, words", [
@@ -178,10 +178,10 @@ def test_a_table_block_shows_the_matching_rows_under_the_pages_headers_and_forma
     ('<!-- versus task=push config="linear b1=0.5" versus=ARCHER name=linear versus_name=ARCHER -->',
      "'linear b1=0.5' against 'ARCHER' on push"),
     ("<!-- versus task=push config=HER versus=HER name=HER -->", "lacks versus_name"),
-    ("<!-- table name=equal_mu_tests task=reach -->", "no row with task=reach"),
-    ("<!-- table name=equal_mu_tests task=push columns=nope -->", "no column nope"),
-    ("<!-- table name=absent task=push -->", "absent.csv does not exist"),
-    ("<!-- table task=push -->", "lacks name"),
+    ("<!-- rows name=equal_mu_tests task=reach -->", "no row with task=reach"),
+    ("<!-- rows name=equal_mu_tests task=push columns=nope -->", "no column nope"),
+    ("<!-- rows name=absent task=push -->", "absent.csv does not exist"),
+    ("<!-- rows task=push -->", "lacks name"),
 ])
 def test_a_bad_block_is_one_line_and_exit_2_and_the_file_is_kept(tables, tmp_path, capsys, block, words):
     shutil.copy(tables / "per_seed.csv", versus_tables(tmp_path))
