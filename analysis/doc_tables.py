@@ -41,7 +41,6 @@ from analysis.tables import COLUMNS, FLOAT_FORMAT, cell_text, column_header
 from hersd.contract.tasks import task_title
 
 DEFAULT_TABLES = Path("results/report/tables")
-BLOCK = re.compile(r"(<!-- (claims-list|claims|seeds|versus|rows)\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
 
 
 class DocTablesError(ValueError):
@@ -175,14 +174,23 @@ def _rows_block(options: str, tables: Path) -> str:
         raise DocTablesError(f"rows block {options.strip()!r}: {error}") from None
 
 
+# a block's kind -> its body from (the opening comment's options, the tables' folder)
+RENDERERS = {
+    "claims": lambda options, tables: claims_markdown(_claims(tables)),
+    "claims-list": lambda options, tables: claims_list(_claims(tables)),
+    "seeds": _seed_block,
+    "versus": _versus_block,
+    "rows": _rows_block,
+}
+KINDS = "|".join(sorted(RENDERERS, key=len, reverse=True))  # claims-list before claims
+BLOCK = re.compile(rf"(<!-- ({KINDS})\b(.*?)-->\n)(.*?)(<!-- /\2 -->)", re.DOTALL)
+
+
 def render(text: str, tables: Path) -> str:
     """``text`` with every block rewritten from the tables in ``tables``."""
     def block(match: re.Match) -> str:
         opening, kind, options, _, closing = match.groups()
-        body = (claims_markdown(_claims(tables)) if kind == "claims" else claims_list(_claims(tables))
-                if kind == "claims-list" else _versus_block(options, tables) if kind == "versus"
-                else _rows_block(options, tables) if kind == "rows" else _seed_block(options, tables))
-        return opening + body + closing
+        return opening + RENDERERS[kind](options, tables) + closing
 
     return BLOCK.sub(block, text)
 
