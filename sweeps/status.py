@@ -8,7 +8,8 @@ store's files only (its log, checkpoint and lock file), so it works while runs a
 - ``new``        nothing yet, or a log without checkpoint (set aside when the run starts again).
 
 Runs started by hersd before lock files recorded pids show as ``resumable`` while they train;
-the age of their last epoch tells the two apart. :func:`time_to_go` sums what the listed runs have left.
+the age of their last epoch tells the two apart. A run with logged epochs also shows how it learns: its
+mean test success over its last RECENT_EPOCHS. :func:`time_to_go` sums what the listed runs have left.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from hersd.contract.runlog import RunLogError
 from hersd.contract.runstore import RunFolder
 
 PACE_EPOCHS = 5  # a run's pace: the mean time of its last this many epochs
+RECENT_EPOCHS = 10  # how a run learns at a glance: its mean test success over its last this many epochs
 
 
 def ago(seconds: float) -> str:
@@ -41,9 +43,17 @@ class RunStatus(NamedTuple):
     holder: int | None = None
 
 
+def recent_success(records: Sequence[dict]) -> str:
+    """``test success 0.35 over its last 10 epochs``: the mean of the last RECENT_EPOCHS epochs' test success
+    (``records``: the log's epoch records, at least one)."""
+    recent = [record["test_success"] for record in records[-RECENT_EPOCHS:]]
+    return f"test success {sum(recent) / len(recent):.2f} over its last {len(recent)} epoch{'s' * (len(recent) > 1)}"
+
+
 def run_status(directory: Path, epochs: int, now: float | None = None) -> RunStatus:
     """The status of the run in ``directory`` planned for ``epochs`` epochs, e.g. state ``running``, detail
-    ``epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago``, 155 epochs left, pace 31."""
+    ``epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago, test success 0.35 over its
+    last 10 epochs``, 155 epochs left, pace 31."""
     folder = RunFolder(directory)
     holder = folder.holder()
     done: list = []
@@ -55,7 +65,7 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> RunSta
         detail.append(f"log unreadable ({str(err).removeprefix(f'{folder.log}: ')})")
     else:
         if records is not None and records.complete:
-            return RunStatus("complete", f"{len(records.records)} epochs", 0)
+            return RunStatus("complete", f"{len(records.records)} epochs, {recent_success(records.records)}", 0)
         if records is not None:
             done = records.records
             detail.append(f"epoch {len(done)} of {epochs}")
@@ -69,6 +79,7 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> RunSta
             detail.append(f"{pace:.0f} s per epoch, ~{ago(pace * max(epochs - len(done), 0))} to go")
     if done:
         detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - folder.log.stat().st_mtime))} ago")
+        detail.append(recent_success(done))
     left = max(epochs - len(done), 0)
     if holder is not None:
         return RunStatus("running", ", ".join(detail), left, pace, holder)

@@ -28,15 +28,18 @@ def test_each_state_with_its_progress(tmp_path):
     now = 1e10
     assert run_status(tmp_path / "nothing", 200) == RunStatus("new", "", 200)
     write_log(tmp_path / "done", 200, complete=True)
-    assert run_status(tmp_path / "done", 200) == RunStatus("complete", "200 epochs", 0)
+    # the mean test success of the last 10 epochs: (190 + ... + 199) / 199 / 10 = 0.977
+    assert run_status(tmp_path / "done", 200) == \
+        RunStatus("complete", "200 epochs, test success 0.98 over its last 10 epochs", 0)
     write_log(tmp_path / "paused", 12)
     (tmp_path / "paused" / "checkpoint.pt").write_bytes(b"")
     log_time = (tmp_path / "paused" / "run.mcap").stat().st_mtime
     assert run_status(tmp_path / "paused", 200, now=log_time + 3 * 3600) == \
-        RunStatus("resumable", "epoch 12 of 200, last epoch 3.0 h ago", 188)
+        RunStatus("resumable", "epoch 12 of 200, last epoch 3.0 h ago, test success 0.59 over its last 10 epochs", 188)
     write_log(tmp_path / "lost", 5)
     lost = run_status(tmp_path / "lost", 200)
     assert lost.state == "new" and "epoch 5 of 200" in lost.detail and lost.epochs_left == 200  # starts afresh
+    assert "test success 0.50 over its last 5 epochs" in lost.detail  # fewer than 10: the mean of all 5
     write_log(tmp_path / "training", 7)
     with RunFolder(tmp_path / "training").lock():
         training = run_status(tmp_path / "training", 200, now=now)
