@@ -95,6 +95,12 @@ def _seed_block(options: str, tables: Path) -> str:
         raise DocTablesError(f"seeds block {options.strip()!r}: {error}") from None
 
 
+def _matching(table: pd.DataFrame, match: dict[str, str]) -> pd.DataFrame:
+    """The rows of ``table`` whose columns named in ``match`` hold its values, compared as text (all without)."""
+    return table[np.logical_and.reduce([table[key].astype(str) == value for key, value in match.items()])
+                 if match else np.ones(len(table), bool)]
+
+
 # summary.csv column(s) -> the row's words and the permutation test's outcome(s); epochs ``never`` where missing
 VERSUS_ROWS = (
     ("median final smoothed test success", ("final_median",), ("final",)),
@@ -113,7 +119,7 @@ def versus_markdown(summary: pd.DataFrame, tests: pd.DataFrame, task: str, confi
     the seeds' means; ``-`` for a row without a test), then a line with the test's kind and power. Raises
     ValueError when either configuration lacks complete seeds to test."""
     def row_of(table: pd.DataFrame, **match: str) -> pd.Series:
-        chosen = table[np.logical_and.reduce([table[key] == value for key, value in match.items()])]
+        chosen = _matching(table, match)
         if len(chosen) != 1:
             raise ValueError(f"{config!r} against {versus!r} on {task}: not in the report's tables (each needs "
                              "two complete seeds)")
@@ -153,8 +159,7 @@ def report_table_markdown(table: pd.DataFrame, match: dict[str, str], columns: S
     unknown = [name for name in (*match, *(columns or ())) if name not in table.columns]
     if unknown:
         raise ValueError(f"no column {', '.join(unknown)}; the table has {', '.join(table.columns)}")
-    chosen = table[np.logical_and.reduce([table[key].astype(str) == value for key, value in match.items()])
-                   if match else np.ones(len(table), bool)]
+    chosen = _matching(table, match)
     if chosen.empty:
         raise ValueError(f"no row with {', '.join(f'{key}={value}' for key, value in match.items())}")
     shown = list(columns) if columns else [name for name in table.columns if name not in match]
