@@ -576,6 +576,9 @@ def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_
 MEAN_RATE_PANELS = ((metrics.RUN_AUC, "AUC: mean raw test success over the K epochs", "AUC"),
                     ("epochs_to_0.5", "first epoch the moving average reaches 0.5 success", "epoch"))
 MEAN_RATE_MARKERS = {"constant rate": "s", "fixed": "o", "adaptive": "D"}
+# Arms whose colour and kind would look alike (e.g. linear and exponential decays, each its kind's first colour;
+# the curves tell them apart by line style, a marker has none) take these shapes in turn.
+REPEAT_MARKERS = ("^", "v", "P", "X", "h", "<", ">")
 DODGE = 0.025  # arms at one mu_eps are drawn side by side, this share of the x axis apart
 
 
@@ -593,7 +596,8 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
                    "success over the K epochs (higher is better); right: the first epoch the "
                    f"{analysis.window}-epoch moving average reaches 0.5 (lower is better; a seed that never does "
                    "is drawn at K + 1, above the dotted line at K). Small dots: the seeds; large markers: the median "
-                   "over seeds, the vertical bar their range. Configurations at the same μ_ε are drawn side by "
+                   "over seeds, the vertical bar their range; triangles and other shapes mark a configuration whose "
+                   "colour and kind match an earlier one's. Configurations at the same μ_ε are drawn side by "
                    f"side. Grey band: the paper's best fixed ε of HER, μ_ε in [{MU_EPS_BAND[0]}, {MU_EPS_BAND[1]}]. "
                    "Complete runs only.")
         found.append(ReportFigure(f"mean_rate_{task}", f"{task_title(task)}: outcome against μ_ε (Fig. 12)", caption,
@@ -610,6 +614,18 @@ def _dodged(arms: pd.DataFrame, span: float) -> pd.Series:
     return arms["mu_eps"] + (rank - (count - 1) / 2) * DODGE * span
 
 
+def _markers(arms: pd.DataFrame) -> list[str]:
+    """Marker of each arm (rows of ``arms``, columns kind, colour): its kind's, or, for the second and later arms
+    of one kind and colour, the next of REPEAT_MARKERS, so no two arms look alike in the legend."""
+    seen: dict[tuple, int] = {}
+    markers = []
+    for kind, colour in zip(arms["kind"], arms["colour"]):
+        repeats = seen.get((kind, colour), 0)
+        seen[(kind, colour)] = repeats + 1
+        markers.append(REPEAT_MARKERS[(repeats - 1) % len(REPEAT_MARKERS)] if repeats else MEAN_RATE_MARKERS[kind])
+    return markers
+
+
 def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: dict[str, dict]) -> Figure:
     legend_width = _legend_width([*arms["config"].astype(str), "the paper's best fixed ε"])
     figure, axes = _panels(len(MEAN_RATE_PANELS), f"{task_title(task)}: outcome against the mean relabel rate μ_ε",
@@ -617,6 +633,7 @@ def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: 
     low, high = min(MU_EPS_BAND[0], arms["mu_low"].min()), max(MU_EPS_BAND[1], arms["mu_high"].max())
     span = max(high - low, 0.05)
     arms = arms.assign(x=_dodged(arms, span), colour=[styles[config]["color"] for config in arms["config"]])
+    arms = arms.assign(marker=_markers(arms))
     seeds = seeds.merge(arms[["config", "x", "colour"]].assign(shift=arms["x"] - arms["mu_eps"]), on="config")
     for axis, (outcome, title, ylabel) in zip(axes, MEAN_RATE_PANELS):
         _mean_rate_panel(axis, seeds, arms, outcome)
@@ -628,7 +645,7 @@ def _draw_mean_rate(task: str, seeds: pd.DataFrame, arms: pd.DataFrame, styles: 
         axes[1].axhline(seeds["total_epochs"].max(), color="0.4", linewidth=0.8, linestyle=":")
     axes[0].set_ylim(-0.02, 1.02)
     for arm in arms.itertuples(index=False):  # legend entries only: empty lines cost nothing to draw
-        axes[0].plot([], [], marker=MEAN_RATE_MARKERS[arm.kind], markersize=7, color=arm.colour, linestyle="none",
+        axes[0].plot([], [], marker=arm.marker, markersize=7, color=arm.colour, linestyle="none",
                      markeredgecolor="black", markeredgewidth=0.6, label=_legend_label(arm.config))
     _figure_legend(figure, axes, legend_width)
     return figure
@@ -648,8 +665,8 @@ def _mean_rate_panel(axis, seeds: pd.DataFrame, arms: pd.DataFrame, outcome: str
         shift = adaptive["x"] - adaptive["mu_eps"]
         axis.hlines(adaptive[outcome], adaptive["mu_low"] + shift, adaptive["mu_high"] + shift,
                     colors=list(adaptive["colour"]), linewidth=1.2, zorder=2, gid="mu_range")
-    for kind, group in arms.groupby("kind", sort=False):
-        axis.scatter(group["x"], group[outcome], s=50, c=list(group["colour"]), marker=MEAN_RATE_MARKERS[kind],
+    for marker, group in arms.groupby("marker", sort=False):
+        axis.scatter(group["x"], group[outcome], s=50, c=list(group["colour"]), marker=marker,
                      edgecolors="black", linewidths=0.6, zorder=3, gid="median")
 
 

@@ -106,6 +106,25 @@ def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_ran
     assert labels == ["the paper's best fixed ε", "HER eps=0.708333", "HER", "linear b1=0.5", "success b1=0.5"]
 
 
+def test_fig12_gives_decays_of_one_colour_and_kind_their_own_marker(tmp_path):
+    """Linear and exponential decays each take their kind's first colour: the curves part them by line style,
+    Fig. 12 by marker, in the panels and in the legend alike."""
+    arms = {"her": ScheduleConfig(), "linear": ScheduleConfig("linear", beta1=0.25),
+            "exp": ScheduleConfig("exponential", beta1=0.25, beta2=0.25)}
+    for name, schedule in arms.items():
+        for seed in range(2):
+            write_run(tmp_path / f"{name}{seed}", make_config(schedule=schedule, seed=seed), np.linspace(0, 1, 6))
+    (report_figure,) = mean_rate_figures(metrics.analyse(*_tables(tmp_path), WINDOW))
+    figure = report_figure.draw()
+    legend = {text.get_text(): handle for text, handle in zip(figure.legends[0].get_texts(),
+                                                               figure.legends[0].legend_handles)}
+    linear, exp = legend["linear b1=0.25"], legend["exp b1=0.25 b2=0.25"]
+    assert matplotlib.colors.same_color(linear.get_color(), exp.get_color())  # one colour: the marker must differ
+    assert (linear.get_marker(), exp.get_marker(), legend["HER"].get_marker()) == ("o", "^", "s")
+    medians = [collection for collection in figure.axes[0].collections if collection.get_gid() == "median"]
+    assert len(medians) == 3  # squares, circles, triangles: one scatter per marker
+
+
 def test_fig4_draws_the_median_of_50_epoch_averages_and_the_range_over_seeds(push_analysis):
     (figure,) = learning_curve_figures(push_analysis)
     assert figure.name == "curves_push_lr1_lh1" and "vs HER and HER eps=0.874375" in figure.title
