@@ -16,24 +16,24 @@ import os
 import sys
 import time
 import traceback
-from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable
 
 from omegaconf import DictConfig
 
-from hersd.contract.compose import CONFIG_PATH, group_choices, group_options
+from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choices, group_options
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import available_cores, resolve_threads
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from sweeps.hydra_private import job_error
-from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas  # noqa: F401
+from sweeps.plan import SweepError, job_train_config, plan_runs, register_schemas
 from sweeps.status import run_status, time_to_go
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
 _composed = False  # set once the sweeper is reached: the command line composed into a config
+_hydra_full_error = "0"  # the user's HYDRA_FULL_ERROR ("1": tracebacks), restored once composed
 
 
 def _joblib_runs(n_jobs: int) -> int:
@@ -72,6 +72,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
     global _composed
     _composed = True
+    os.environ["HYDRA_FULL_ERROR"] = _hydra_full_error  # composed: Hydra reports the rest as the user set it
     try:  # the sweep's own settings (e.g. seeds >= 1), before the grid expands them
         sweep_threads = job_train_config(sweeper.config).threads
     except ConfigError as err:
@@ -244,7 +245,9 @@ def usage() -> str:
 
 def main() -> None:
     """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs; an
-    interrupt (Ctrl-C) ends with one line and exit code 130."""
+    interrupt (Ctrl-C) ends with one line and exit code 130; a command line that does not compose, with one
+    line and exit code 2 (the traceback with ``HYDRA_FULL_ERROR=1``)."""
+    global _hydra_full_error
     import hydra
 
     if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
@@ -259,23 +262,18 @@ def main() -> None:
                   f"type {instead}", file=sys.stderr)
             sys.exit(2)
     register_schemas()
-    os.environ.setdefault("HYDRA_FULL_ERROR", "0")
+    _hydra_full_error = os.environ.get("HYDRA_FULL_ERROR", "0")
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # a composition error reaches the except below; sweep_runs restores it
     try:
         hydra.main(config_path=CONFIG_PATH, config_name="sweep", version_base="1.3")(run_job)()
-    except SystemExit as end:
-        if end.code and not _composed:
-            print(f"hersd-sweep: valid choices: {choices_line()}", file=sys.stderr)
-        raise
     except KeyboardInterrupt:
         print("hersd-sweep: interrupted; finished runs and epochs are kept: re-run the same command to resume",
               file=sys.stderr)
         sys.exit(130)
+    except Exception as err:  # the command line does not compose: nothing ran
+        if _composed or _hydra_full_error == "1":
+            raise
+        said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
+        print(f"hersd-sweep: error: {'+' if said.startswith('grid=') else ''}{said}", file=sys.stderr)
+        sys.exit(2)
 
-
-def choices_line() -> str:
-    """One line listing the grid/task/algo/schedule options and the top-level keys."""
-    groups = [f"{'+grid' if group == 'grid' else group}={'|'.join(group_choices(group))}"
-              for group in ("grid", "task", "algo", "schedule", "learner")]
-    nested = ("task", "algo", "schedule", "ddpg", "learner")
-    keys = [f.name for f in fields(SweepConfig) if f.name not in nested]
-    return "  ".join(groups) + f"  keys: {', '.join(keys)}, " + ", ".join(f"{name}.*" for name in nested)

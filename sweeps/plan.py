@@ -31,9 +31,11 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from hydra.errors import HydraException
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
+from omegaconf.errors import OmegaConfBaseException
 
-from hersd.contract.compose import open_schedule, register_schema, register_train_schema
+from hersd.contract.compose import explain_config_error, open_schedule, register_schema, register_train_schema
 from hersd.contract.config import TrainConfig, to_train_config
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
@@ -187,6 +189,7 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
         try:
             train_cfg = job_train_config(configs.config(job))
             planned.setdefault(run_dir(train_cfg), PlannedRun(job, train_cfg.epochs))
-        except ConfigError as err:
-            raise SweepError(f"run [{' '.join(job)}]: {err}", exit_code=2) from None
+        except (ConfigError, HydraException, OmegaConfBaseException) as err:  # e.g. a swept value no config names
+            said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
+            raise SweepError(f"run [{' '.join(job)}]: {said}", exit_code=2) from None
     return planned
