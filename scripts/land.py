@@ -19,7 +19,7 @@ run: ``landed``, ``unchanged`` or ``kept``, with its state.
 only (whatever else is staged stays staged): ``results: <run> complete (K epochs)``. A git
 command that fails (another holds the index lock) is retried; if it still fails the line says so
 and the exit status is 1. Safe to run at any time and again: after each run, or in a loop
-(results/README.md). An operator's chore, not package code: the package never calls git.
+(results/README.md). An operator's chore, not package code: the package never commits.
 """
 
 from __future__ import annotations

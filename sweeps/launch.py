@@ -25,7 +25,7 @@ from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choi
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import available_cores, resolve_threads
-from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
+from hersd.contract.runstore import RunFolder, RunLockedError, check_writable, run_dir
 from sweeps.hydra_private import job_error
 from sweeps.plan import SweepError, job_train_config, plan_runs, register_schemas
 from sweeps.status import run_status, time_to_go
@@ -94,7 +94,10 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     if threads is not None:
         to_launch = [with_threads(job, threads) for job in to_launch]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
-    sweep_dir.mkdir(parents=True, exist_ok=True)
+    try:  # below results_dir, like every run's folder
+        check_writable(sweep_dir)
+    except ConfigError as err:
+        raise SweepError(str(err), exit_code=2) from None
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
     results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])

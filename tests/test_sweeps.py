@@ -79,6 +79,14 @@ def test_bad_input_is_one_line_naming_the_choices_and_exit_2(tmp_path, args, exp
     assert not any(tmp_path.iterdir())
 
 
+def test_an_unwritable_results_dir_is_one_line_and_exit_2_before_any_run(tmp_path):
+    (tmp_path / "a_file").write_text("not a folder")
+    result = sweep("+grid=smoke", f"results_dir={tmp_path / 'a_file' / 'runs'}", check=False)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"hersd-sweep: error: results_dir: cannot write to {tmp_path / 'a_file' / 'runs'}")
+    assert result.stderr.rstrip().endswith("pass results_dir=<a writable folder>")
+
+
 def test_hydra_full_error_still_gives_the_traceback(tmp_path):
     result = subprocess.run([*SWEEP, "+grid=nope", f"results_dir={tmp_path}"], capture_output=True, text=True,
                             timeout=600, env={**os.environ, "HYDRA_FULL_ERROR": "1"})

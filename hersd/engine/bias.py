@@ -25,9 +25,10 @@ target read kinematics one substep old; continuations drifted by up to 5 mm).
 
 Rewards are the env's own (lambda = 1: for ARCHER the critic's hindsight targets are scaled by
 lambda_h by design). The critic bootstraps through the time limit (no done mask), so for a policy
-that never succeeds its fixed point is -1 / (1 - gamma) = -50, while 50 steps of -1 sum to -18.9:
-returns therefore run ``return_steps`` (default 300 = T + 250) steps past s_t, leaving out a tail of
-weight gamma^300 = 0.0023 (at most 0.12 of -50).
+that never succeeds its fixed point is -1 / (1 - gamma) = -50, while the discounted -1s left in its
+50-step episode sum to -18.9 on average over its states: returns therefore run ``return_steps``
+(default 300 = T + 250) steps past s_t, leaving out a tail of weight gamma^300 = 0.0023 (at most
+0.12 of -50).
 
 The evaluation has its own envs and its own random stream (seeded from the run's seed and the
 epoch), and only reads the agent: the run's envs, RNGs, torch's RNG and metrics do not depend on

@@ -34,7 +34,7 @@ Each trial trains one run per seed through the run store; re-running the same co
 resumes the study. search.* settings: SearchConfig in sweeps/search/config.py, conf/search/*.yaml;
 every other override goes to the training config as for hersd-train (task=reach epochs=50 ...).
 
-  search=default|wide|ci        search.n_trials=50  search.n_jobs=2  search.seeds=3
+  search=default|wide|ci        search.n_trials=50  search.n_jobs=1  search.seeds=1   (the defaults)
   search.objective=auc|final    search.pruner.kind=median|hyperband|none
   search.space.beta2.low=-1     search.storage=journal:/shared/hersd/study.log
   search.space.ranges.k0={low: 1, high: 50}   (any searched setting's range)
