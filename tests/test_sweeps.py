@@ -64,6 +64,7 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
 @pytest.mark.parametrize("args, expected", [
     (["+grid=nope"], "+grid=nope is not a known grid; choose one of: beta, bf16_push, "),
     (["task=cartpole"], "task=cartpole is not a known task; choose one of: custom, hand_block, "),
+    (["hydra/launcher=nope"], "hydra/launcher=nope is not a known hydra/launcher; choose one of: "),
     (["task=push,pushh"], "run [seed=0 task=pushh RESULTS]: task=pushh is not a known task; choose one of: "),
     (["+grid=beta", "schedule.beta1=2"], "schedule.beta1 must be a number in [0, 1]"),
     (["+grid=smoke", "schedule.beta1=0.5"], "schedule.beta1 is not a setting of schedule constant; its settings: eps"),

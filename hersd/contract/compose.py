@@ -99,7 +99,9 @@ def explain_config_error(err: Exception, what: str = "config field", see: str = 
     if isinstance(err, ConfigError):
         return str(err)
     if isinstance(err, MissingConfigException) and err.missing_cfg_file:
-        group, _, value = err.missing_cfg_file.partition("/")
+        group, _, value = err.missing_cfg_file.rpartition("/")  # a nested group too: hydra/launcher=<value>
+        if not group:
+            group, value = value, ""
         if group == "learner" and value and (instead := typed_instead(value)):
             return f"learner={value} names a class, which no config of the learner group holds; type {instead}"
         choices = sorted(err.options) if err.options is not None else group_options(group)
