@@ -2,7 +2,8 @@
 
 - :func:`critic_curves`: per (task, config, epoch), the median over seeds and the quartiles of
   each :data:`CRITIC_COLUMNS` field (the bias of Q against the policy's true return, for real and
-  hindsight goals and hindsight goals the object was moved to, hersd/engine/bias.py; the mean Q of real-goal and relabelled training rows);
+  hindsight goals and hindsight goals the object was moved to, hersd/engine/bias.py; the share of hindsight
+  pairs whose return is exactly 0; the mean Q of real-goal and relabelled training rows);
 - :func:`integrated_bias`: per run and goal type, the bias averaged over epochs 1-50 (trapezoids
   over the evaluated epochs, so the dense early evaluations weigh what they span);
 - :func:`bias_tests`: two-sided permutation tests of that average between the configurations of a task;
@@ -19,7 +20,8 @@ import pandas as pd
 from analysis.metrics import BOOTSTRAP_SEED, GROUP, PERMUTATION_RESAMPLES, _mean_difference
 
 GOAL_TYPES = ("real", "hindsight", "moved")
-CRITIC_COLUMNS = ("bias_real_mean", "bias_hindsight_mean", "bias_moved_mean", "q_real_mean", "q_hindsight_mean")
+CRITIC_COLUMNS = ("bias_real_mean", "bias_hindsight_mean", "bias_moved_mean", "bias_hindsight_zero_share",
+                  "q_real_mean", "q_hindsight_mean")
 INTEGRATION_EPOCHS = (1, 50)
 EVALUATION_COLUMNS = ["task", "config", "seed", "complete", "epoch", "bias_real_mean", "bias_hindsight_mean",
                       "bias_hindsight_zero_share", "bias_moved_mean", "bias_moved_count", "bias_seconds", "path"]

@@ -495,25 +495,33 @@ def critic_figures(analysis: Analysis) -> list[ReportFigure]:
     caption = ("Top: the critic's Q(s, π(s, g), g) minus the discounted return the deterministic policy obtains "
                "from s for g (hersd/engine/bias.py; returns run 300 steps, past the 50-step limit the critic bootstraps "
                "through), for the episodes' real goals and for hindsight goals (future achieved goals, each "
-               "valued by a rollout from the restored state). Bottom: mean Q(s, a) over each epoch's training "
-               "rows that kept their real goal and over the relabelled rows. Median over complete seeds, "
-               "band: interquartile range. Positive bias is overestimation.")
+               "valued by a rollout from the restored state). Middle: the bias for hindsight goals the object "
+               "was moved to (farther than the success radius from where it was at s; logged from 2026-11-27, "
+               "empty where no pair had moved it), and the share of the hindsight pairs whose return is exactly 0 "
+               "(their goal held from s on: near 1, the hindsight bias says little). Bottom: mean Q(s, a) over "
+               "each epoch's training rows that kept their real goal and over the relabelled rows. Median over "
+               "complete seeds, band: interquartile range. Positive bias is overestimation.")
     return [ReportFigure("critic_bias", "The critic against the true return (Fig. 10, measured)", caption,
                          partial(_draw_critic, curves, config_styles(analysis)))]
 
 
-CRITIC_PANELS = (("bias_real_mean", "bias, real goals (Q − return)"),
-                 ("bias_hindsight_mean", "bias, hindsight goals (Q − return)"),
-                 ("q_real_mean", "mean Q, real-goal training rows"),
-                 ("q_hindsight_mean", "mean Q, relabelled training rows"))
+# A row of panels per pair; a task's row is left out when neither of its columns has a value (older logs).
+CRITIC_ROWS = ((("bias_real_mean", "bias, real goals (Q − return)"),
+                ("bias_hindsight_mean", "bias, hindsight goals (Q − return)")),
+               (("bias_moved_mean", "bias, goals the object was moved to (Q − return)"),
+                ("bias_hindsight_zero_share", "hindsight pairs whose return is exactly 0 (share)")),
+               (("q_real_mean", "mean Q, real-goal training rows"),
+                ("q_hindsight_mean", "mean Q, relabelled training rows")))
 
 
 def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict]) -> Figure:
     tasks = ordered_tasks(curves["task"])
     legend_width = _legend_width(curves["config"].unique())
-    figure, axes = _panels(len(tasks) * len(CRITIC_PANELS), "The critic's bias and its Q by row type "
+    panels = [(task, column, title) for task in tasks for row in CRITIC_ROWS
+              if curves.loc[curves["task"] == task, [f"{column}_median" for column, _ in row]].notna().any(axis=None)
+              for column, title in row]
+    figure, axes = _panels(len(panels), "The critic's bias and its Q by row type "
                            "(median over seeds, interquartile band)", legend_width=legend_width, sharey=False)
-    panels = [(task, column, title) for task in tasks for column, title in CRITIC_PANELS]
     for axis, (task, column, title) in zip(axes, panels):
         for config, curve in curves[curves["task"] == task].groupby("config", observed=True):
             curve = curve.dropna(subset=[f"{column}_median"])
@@ -522,7 +530,9 @@ def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict]) -> Figure:
                       **{**style, "linewidth": 1.1}, marker="." if column.startswith("bias") else None)
             axis.fill_between(curve["epoch"], curve[f"{column}_q25"], curve[f"{column}_q75"],
                               color=style.get("color"), alpha=0.15, linewidth=0)
-        if column.startswith("bias"):
+        if column.endswith("_share"):
+            axis.set_ylim(-0.02, 1.02)
+        elif column.startswith("bias"):
             axis.axhline(0.0, color="0.5", linewidth=0.6)
         _set_title(axis, f"{task_title(task)}: {title}")
     _label_outer(axes, "Q")

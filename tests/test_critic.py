@@ -11,7 +11,8 @@ EVALUATED = [1, 2, 5, 10, 20, 30, 50, 75]
 
 
 def epochs_table(biases: dict[str, list[float]]) -> pd.DataFrame:
-    """Runs of one task: config -> one constant real-goal bias per run (hindsight: minus it; moved: 3 x), evaluated at
+    """Runs of one task: config -> one constant real-goal bias per run (hindsight: minus it; moved: 3 x; half the
+    hindsight pairs at a return of 0), evaluated at
     EVALUATED, with an unevaluated epoch 3 (NaN) between; q_real_mean = 10 * run + epoch."""
     rows, run = [], 0
     for config, values in biases.items():
@@ -22,6 +23,7 @@ def epochs_table(biases: dict[str, list[float]]) -> pd.DataFrame:
                              "bias_real_mean": value if evaluated else np.nan,
                              "bias_hindsight_mean": -value if evaluated else np.nan,
                              "bias_moved_mean": 3 * value if evaluated else np.nan,
+                             "bias_hindsight_zero_share": 0.5 if evaluated else np.nan,
                              "q_real_mean": 10.0 * run + epoch, "q_hindsight_mean": -1.0})
             run += 1
     table = pd.DataFrame(rows)
@@ -78,7 +80,8 @@ def test_the_report_draws_the_critic_from_real_logs(tmp_path):
     figures = critic_figures(analyse(table.runs, table.epochs, window=1))
     assert [figure.name for figure in figures] == ["critic_bias"]
     drawn = figures[0].draw()
-    assert len(drawn.axes) == 4
+    assert len(drawn.axes) == 6
+    assert "moved to" in drawn.axes[2].get_title() and drawn.axes[3].get_ylim() == (-0.02, 1.02)
     labels = {line.get_label() for line in drawn.axes[0].get_lines()}
     assert "HER" in labels and any(label.startswith("linear") for label in labels)
     from analysis.report import build_report
