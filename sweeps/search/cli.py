@@ -1,4 +1,4 @@
-"""``hersd-search``, the command (entry point ``sweeps.search.cli:main``): compose the search
+"""``hersd-search``, the command (its entry point ``sweeps.search:main`` calls :func:`main`): compose the search
 and training configs, open the study, re-enqueue lost trials, run or submit the workers, and
 print the outcome with the ``hersd-report`` command that draws the study (the search never
 imports the analysis: data flows search -> storage -> report).
