@@ -249,6 +249,7 @@ def _write_studies(studies: Studies, folder: Path) -> list[Path]:
 
 
 def _html_figure(figure: ReportFigure, image: str) -> str:
+    """One figure of the page: its title, its image (an ``<img>`` or inline SVG) and its caption."""
     return (f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
             f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
 
@@ -280,8 +281,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
               "<h2>Figures</h2>"]
     placed = place_after_curves([figure.name for figure, _ in images], animations)
     for figure, image in images:
-        parts.append(f'<figure id="{figure.name}"><h3>{html.escape(figure.title)}</h3>{image}'
-                     f"<figcaption>{html.escape(figure.caption)}</figcaption></figure>")
+        parts.append(_html_figure(figure, image))
         if figure.name == f"composition_{PAPER_COMPOSITION_TASK}" and not analysis.composition_vs_paper.empty:
             parts += [f"<h3>Minibatch composition at epoch {PAPER_COMPOSITION_EPOCH}: hersd vs paper</h3>",
                       f"<p>{TABLE_NOTES['composition']}</p>", html_table(analysis.composition_vs_paper)]
