@@ -2,8 +2,8 @@
 
 Runs ``hersd-sweep +grid=smoke`` (4 FetchReach runs) with FetchReach's paper settings per
 epoch (10 cycles, 20 test episodes) and ``--epochs`` epochs (default 8: ~45 s per run) twice
-into fresh temporary folders, first with ``hydra.launcher.n_jobs=1`` then with ``n_jobs=2``,
-and prints the two times and their ratio. Also printed: the start-up costs that do not
+into fresh temporary folders, one torch thread per run, first with ``hydra.launcher.n_jobs=1``
+then with ``n_jobs=2``, and prints the two times and their ratio. Also printed: the start-up costs that do not
 shrink with more jobs (the sweep command composing and checking its runs; each worker
 process importing torch and MuJoCo), which short runs cannot amortise; and the dry run of the
 300-run beta grid (``+grid=beta --dry-run``: every run composed and checked, nothing trained)
@@ -46,7 +46,7 @@ def python_wall_and_cpu(args: list[str]) -> tuple[float, float]:
 def sweep_seconds(n_jobs: int, epochs: int) -> float:
     with tempfile.TemporaryDirectory() as results:
         return python_seconds([*SWEEP, f"epochs={epochs}", "task.cycles_per_epoch=10", "ddpg.test_rollouts=10",
-                               f"hydra.launcher.n_jobs={n_jobs}", f"results_dir={results}"])
+                               f"hydra.launcher.n_jobs={n_jobs}", "threads=1", f"results_dir={results}"])
 
 
 def main() -> None:

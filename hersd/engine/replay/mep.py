@@ -18,8 +18,8 @@ What differs from the original code, and why (the quantities computed are the sa
 
 The functions take everything they use as arguments (``fit_density`` updates the model it
 is given); :class:`EpisodePrioritizer` holds the fitted model and the rarity array for the
-training loop and its checkpoint. Fitting and scoring use one BLAS thread, as
-the rest of a run uses one torch thread: runs of a sweep share the cores, and an
+training loop and its checkpoint. Fitting and scoring use one BLAS thread, whatever
+``threads`` gives the run's torch work: runs of a sweep share the cores, and an
 oversubscribed multi-threaded BLAS made a fit fifty times slower on a loaded 2-core
 machine (docs/MEP.md).
 """
