@@ -18,14 +18,17 @@ from hersd.contract.tasks import CUSTOM, TASKS
 from sweeps.plan import register_schemas
 
 
-@pytest.mark.parametrize("group", ["task", "algo", "schedule", "learner"])
-def test_every_group_option_composes(group):
-    assert group_options(group)
+@pytest.mark.parametrize("group, default", [("task", "push"), ("algo", "her"), ("schedule", "constant"),
+                                            ("learner", "ddpg")])
+def test_every_group_option_composes_and_makes_its_own_run(group, default):
+    """Each option composes, and only the default option gives the default run (the choice reaches the config)."""
+    assert default in group_options(group)
+    default_hash = config_hash(compose_train([]))
     for option in group_options(group):
         extra = {CUSTOM: ["task.env_id=HandManipulateEgg-v1"], "table": ["epochs=2", "schedule.rates=[0.9,0.8]"]}
         extra = extra.get(option, []) if group in ("task", "schedule") else []
         cfg = compose_train([f"{group}={option}", *extra])
-        assert isinstance(cfg, TrainConfig)
+        assert isinstance(cfg, TrainConfig) and (config_hash(cfg) == default_hash) == (option == default), option
 
 
 def test_task_files_name_the_tasks_of_the_table_and_take_its_settings():
@@ -128,7 +131,9 @@ def test_every_committed_log_keeps_its_directory():
 def test_every_committed_log_keeps_its_tag_and_identity_through_its_schedule_class():
     """A log's schedule record read back as its kind's class gives the same record (so a new config of that run
     hashes as the log does) and the folder tag the log lies in."""
-    for path in committed_logs():
+    logs = committed_logs()
+    assert logs
+    for path in logs:
         config = read_run(path).meta["config"]
         schedule = schedule_from_record(config["schedule"])
         assert schedule.tag() == path.parent.parent.name, path
@@ -140,14 +145,15 @@ def test_the_paper_kinds_presets_keep_their_tags_and_records(preset):
     """Tags of the conf/schedule presets, as the flat schema made them (a record holds every flat field)."""
     golden = {"constant": "constant-0.8", "constant_mu_linear_025": "constant-0.874375",
               "exponential": "exponential-b1_0.25-b2_0.25", "linear": "linear-b1_0.25", "success": "success-b1_0.25-w10",
-              "cosine": "cosine-1_0.5", "table": None}
+              "cosine": "cosine-1_0.5", "table": "table-506cb7a1"}
     golden.update({f"paper_{shape}_{n:03d}": f"linear-b1_{n / 100:g}" if shape == "linear"
                    else f"exponential-b1_{n / 100:g}-b2_{n / 100:g}" for shape in ("linear", "exp") for n in (25, 50, 75, 100)})
-    if golden[preset] is None:  # a table needs its rates
-        return
-    schedule = compose_train([f"schedule={preset}"]).schedule
+    given = ["epochs=2", "schedule.rates=[0.9,0.8]"] if preset == "table" else []  # a table needs its rates
+    schedule = compose_train([f"schedule={preset}", *given]).schedule
     assert schedule.tag() == golden[preset]
-    if preset != "cosine":
+    if preset == "table":
+        assert schedule.record() == {"kind": "table", "rates": [0.9, 0.8], "file": None, "from_run": None}
+    elif preset != "cosine":
         assert set(schedule.record()) == {"kind", "eps", "beta1", "beta2", "mean_rate", "window", "eps_min"}
 
 

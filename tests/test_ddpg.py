@@ -86,4 +86,10 @@ def test_state_dict_round_trip_gives_the_same_next_update():
     agent.update(batch(seed=2))
     clone = tiny_agent(polyak=0.95)
     clone.load_state_dict(copy.deepcopy(agent.state_dict()))
-    assert agent.update(batch(seed=3)) == clone.update(batch(seed=3))
+    for seed in (3, 4, 5):  # the stats are computed before the step: later updates show Adam's state and the targets
+        assert agent.update(batch(seed=seed)) == clone.update(batch(seed=seed))
+    modules = [name for name in agent.PARTS if isinstance(getattr(agent, name), torch.nn.Module)]
+    assert {"actor", "critic"} <= set(modules)
+    for name in modules:  # the weights after the steps: Adam's moments and step counts were carried over too
+        for mine, theirs in zip(getattr(agent, name).parameters(), getattr(clone, name).parameters()):
+            assert torch.equal(mine, theirs), name

@@ -139,7 +139,7 @@ def test_checkpoints_load_across_the_two_updates(name):
     assert all(fast.optimizer.state[p]["step"].item() == 3 for p in fast.critic.parameters())
 
 
-def test_the_run_builds_the_fast_learner_and_nothing_else_changes():
+def test_update_fast_builds_the_fast_learner_and_the_default_the_autograd_one():
     cfg = compose_train(["task=reach", "update=fast"])
     spec = EnvSpec(obs_dim=10, goal_dim=3, action_dim=4, horizon=50, max_action=1.0, distance_threshold=0.05,
                    reward_range=(-1.0, 0.0))

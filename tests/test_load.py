@@ -3,13 +3,14 @@ resumed and old logs, reading in worker processes."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from analysis import load, metrics
+from analysis import load, metrics, workers
 from analysis.figures import config_styles
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
@@ -177,10 +178,20 @@ def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_
     assert runs.loc["success b1=0.5", "mu_eps"] == pytest.approx(logged.mean())
 
 
-def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch):
+def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch, tmp_path):
     here = load_runs(sweep)  # 32 logs: fewer than load.PARALLEL_FROM, read in this process
     monkeypatch.setattr(load, "PARALLEL_FROM", 2)
+    monkeypatch.setattr(workers, "available_cores", lambda: 2)  # forks on a 1-core machine too
+    read_log = load.read_log
+
+    def read_log_noting_the_process(path, folder):
+        (tmp_path / str(os.getpid())).touch()  # a file: a forked reader's note outlives it
+        return read_log(path, folder)
+
+    monkeypatch.setattr(load, "read_log", read_log_noting_the_process)
     forked = load_runs(sweep)
+    readers = {int(note.name) for note in tmp_path.iterdir()}
+    assert readers and os.getpid() not in readers  # every log read in another process
     pd.testing.assert_frame_equal(forked.runs, here.runs)
     pd.testing.assert_frame_equal(forked.epochs, here.epochs)
 

@@ -135,6 +135,7 @@ def test_mep_off_leaves_the_training_sampler_untouched(tmp_path, monkeypatch):
     first_run = batches[:]
     batches.clear()
     train(compose([*TINY, "epochs=2", f"results_dir={tmp_path / 'again'}"]))
+    assert len(batches) == len(first_run) > 0
     assert all(np.array_equal(a, b) for old, new in zip(first_run, batches) for a, b in zip(old, new))
 
 

@@ -65,8 +65,20 @@ def test_slurm_workers_run_as_submitit_jobs_each_on_its_whole_allocation(tmp_pat
     workers; each job's runs take every core it has (concurrent_runs=1), not a share."""
     import submitit
 
-    real_executor = submitit.AutoExecutor
-    monkeypatch.setattr(submitit, "AutoExecutor", lambda folder, cluster: real_executor(folder, cluster="local"))
+    real_executor, shared_by = submitit.AutoExecutor, []
+
+    def local_executor(folder, cluster):
+        executor = real_executor(folder, cluster="local")
+        map_array = executor.map_array
+
+        def recording_map_array(function, *per_job):
+            shared_by.append(list(per_job[-1]))  # each job's concurrent_runs
+            return map_array(function, *per_job)
+
+        executor.map_array = recording_map_array
+        return executor
+
+    monkeypatch.setattr(submitit, "AutoExecutor", local_executor)
     monkeypatch.setattr(cli, "check_slurm", lambda slurm: None)
     cli.main(["search.launcher=slurm", "search.n_jobs=2", "search.n_trials=2", "search.pruner.kind=none",
               *tiny_search(tmp_path, epochs=2)])
@@ -77,5 +89,6 @@ def test_slurm_workers_run_as_submitit_jobs_each_on_its_whole_allocation(tmp_pat
         time.sleep(1.0)
     study = load(db)
     assert [t.state for t in study.trials] == [TrialState.COMPLETE] * 2, list((tmp_path / "search").rglob("*.err"))
+    assert shared_by == [[1, 1]]  # no job shares its allocation with another's runs
     for trial in study.trials:
         assert 1 <= run_meta(trial.user_attrs["run_dirs"][0])["threads"] <= available_cores()
