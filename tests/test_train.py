@@ -275,3 +275,27 @@ def test_help_is_generated_from_the_schema(capsys):
     out = capsys.readouterr().out
     assert "schedule.beta1=0.0" in out and "eq. 9: final drop of the rate" in out
     assert "ddpg.polyak=0.95" in out and "threads=auto" in out and "task=custom|hand_block|hand_reach|pick_and_place|push|reach|slide" in out
+
+
+def test_the_commit_is_dirty_for_changed_code_not_for_changed_results(tmp_path, monkeypatch):
+    """A run records ``<commit>-dirty`` when tracked code differs from the commit; run logs and reports
+    below results/ are data the runs write, so a checkout whose only changes are there is clean."""
+    import hersd
+    from hersd.engine import train as train_module
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+
+    for name in ("hersd/__init__.py", "results/push/run.mcap"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("0")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "c")
+    monkeypatch.setattr(hersd, "__file__", str(tmp_path / "hersd" / "__init__.py"))
+    clean = train_module._git_commit()
+    assert clean and len(clean) == 40
+    (tmp_path / "results/push/run.mcap").write_text("1")
+    assert train_module._git_commit() == clean
+    (tmp_path / "hersd/__init__.py").write_text("1")
+    assert train_module._git_commit() == clean + "-dirty"

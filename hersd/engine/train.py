@@ -385,13 +385,14 @@ def run_metadata(cfg: TrainConfig, state: RunState, command: str, threads: int, 
 
 
 def _git_commit() -> str | None:
-    """The commit of the code that runs (with ``-dirty`` for uncommitted changes), if it is a git checkout."""
+    """The commit of the code that runs (with ``-dirty`` for uncommitted changes), if it is a git checkout.
+    Changes below the checkout's ``results/`` (run logs and their report: data, not code) do not count."""
     source = Path(hersd.__file__).resolve().parent.parent
     try:
         out = subprocess.run(["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True,
                              text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=5).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no", "--",
+                                ".", ":(exclude)results"], capture_output=True, text=True, timeout=5).stdout.strip()
         return out + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return None
