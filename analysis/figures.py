@@ -230,7 +230,7 @@ def _figure_legend(figure: Figure, axes, legend_width: float, order: list[str] |
 def _draw_curve(axis, medians: pd.DataFrame, in_progress: pd.DataFrame, config: str, style: dict) -> None:
     """Median line and min-max band of one config's complete runs (``medians``: one task's median
     curves), then each of its runs in progress on its own, thin and dashed (``in_progress``: their
-    smoothed curves)."""
+    smoothed curves; one of a single epoch, which a line cannot show, as a dot)."""
     curve = medians[medians["config"] == config]
     if not curve.empty:
         axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
@@ -238,7 +238,7 @@ def _draw_curve(axis, medians: pd.DataFrame, in_progress: pd.DataFrame, config: 
     unfinished = in_progress[in_progress["config"] == config]
     for _, run in unfinished.groupby("run") if not unfinished.empty else ():  # a groupby costs ms, even empty
         axis.plot(run["epoch"], run["smoothed"], color=style["color"], label=_legend_label(config + IN_PROGRESS),
-                  **IN_PROGRESS_STYLE)
+                  **IN_PROGRESS_STYLE, marker="o" if len(run) == 1 else "None", markersize=3)
 
 
 def _in_progress(analysis: Analysis) -> pd.DataFrame:
@@ -254,8 +254,8 @@ def _legend_labels(configs: list[str], in_progress: pd.DataFrame) -> list[str]:
 
 def _in_progress_note(in_progress: pd.DataFrame) -> str:
     """The caption's sentence about runs in progress (none: empty)."""
-    return (" Thin dashed lines: runs still in progress, each seed's own moving average; they enter neither the "
-            "median, the band nor any table." if not in_progress.empty else "")
+    return (" Thin dashed lines: runs still in progress, each seed's own moving average (a dot: its first epoch "
+            "alone); they enter neither the median, the band nor any table." if not in_progress.empty else "")
 
 
 def _success_ylabel(window: int) -> str:

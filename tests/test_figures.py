@@ -36,6 +36,7 @@ def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path)
     assert lines["HER (in progress)"].get_ydata().tolist() == [1.0] * 4  # the run's own moving average
     assert lines["HER (in progress)"].get_linewidth() < lines["HER"].get_linewidth()
     assert lines["HER (in progress)"].get_linestyle() == "--"
+    assert lines["HER (in progress)"].get_marker() == "None"  # a line of 4 epochs needs no dots
     assert lines["HER"].get_ydata()[-1] == pytest.approx((0.8 + 2.6 / 3) / 2)  # the complete seeds' median
     exp_lines = {line.get_label() for line in exp_panel.get_lines()}
     assert exp_lines == {"HER", "HER (in progress)", "exp b1=0.5 b2=0.5 (in progress)"}  # drawn, and marked
@@ -50,6 +51,19 @@ def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path)
     assert runs.loc["her0/run.mcap", ["final", "epochs_to_0.5", "raw_epochs_to_0.5"]].tolist() == [0.8, 5, 4]
     page = (tmp_path / "report" / "index.html").read_text(encoding="utf-8")
     assert "in progress (epoch 3 of 6)" in page and "7 runs (3 in progress" in page
+
+
+def test_a_run_in_progress_of_one_epoch_is_a_dot(tmp_path):
+    """A run that has just started (one epoch logged) is seen: a line through one point draws nothing."""
+    schedule = ScheduleConfig(kind="linear", beta1=0.5)
+    write_run(tmp_path / "done", make_config(schedule=schedule, seed=0, epochs=4), [0.1, 0.3, 0.5, 0.7])
+    write_run(tmp_path / "started", make_config(schedule=schedule, seed=1, epochs=4), [0.2], complete=False)
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    (figure,) = learning_curve_figures(analysis)
+    lines = {line.get_label(): line for line in figure.draw().axes[0].get_lines()}
+    started = lines["linear b1=0.5 (in progress)"]
+    assert started.get_xdata().tolist() == [1] and started.get_marker() == "o"
+    assert lines["linear b1=0.5"].get_marker() == "None"
 
 
 def test_no_figure_without_its_data(hand_sized):
