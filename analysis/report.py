@@ -23,7 +23,8 @@ Output (``<FOLDER>/report`` unless ``--out``)::
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
 are read, and the figures drawn, in worker processes, one per core (analysis.workers); the
 modules that compute and draw (scipy, matplotlib) are imported while the logs are read, and the statistics
-and table files are computed and written while the figures are drawn.
+and table files are computed and written while the figures are drawn. Figure and table files an earlier
+report left in figures/ and tables/ that this one did not write are deleted.
 """
 
 from __future__ import annotations
@@ -532,8 +533,20 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
                                 animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
+    _remove_stale(out, [*paths, *written])
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
+
+
+def _remove_stale(out: Path, written: list[Path]) -> None:
+    """Delete the figure and table files an earlier report left in ``out``'s figures/ and tables/ that this one
+    did not write (a figure of a task filtered out, a table that no longer applies), so every file there is of
+    this report. search/ is left alone: with ``--out`` at the results folder it holds the study storages."""
+    kept = set(written)
+    for folder in ("figures", "tables"):
+        for path in (out / folder).glob("*"):
+            if path.is_file() and path.suffix.lstrip(".") in (*FORMATS, "csv", "md") and path not in kept:
+                path.unlink()
 
 
 class _OneLineParser(argparse.ArgumentParser):

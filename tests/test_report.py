@@ -297,3 +297,17 @@ def test_a_smoke_sweep_stays_out_of_every_200_epoch_row_and_a_configuration_in_p
     assert in_progress[["final_median", "auc", "iqm", "p_improve_HER"]].isna().all()
     page = (tmp_path / "both_report/index.html").read_text(encoding="utf-8")
     assert "FetchPickAndPlace · exp b1=0.25 b2=0.25: 2 runs, 0 complete, 2 in progress</summary>" in page
+
+
+def test_a_second_report_into_the_same_folder_leaves_no_file_of_the_first(sweep, tmp_path):
+    out = tmp_path / "report"
+    assert report_main([str(sweep), "--out", str(out)]) == 0
+    assert (out / "figures" / "curves_slide_lr1_lh1.png").exists()
+    assert report_main([str(sweep), "--out", str(out), "--task", "push", "--algo", "her"]) == 0
+    figures = {path.name for path in (out / "figures").glob("*.png")}
+    assert figures and not any("slide" in name for name in figures)
+    assert not any("lh0.5" in name for name in figures)  # ARCHER's panels went with --algo her
+    summary = pd.read_csv(out / "tables" / "summary.csv")
+    assert set(summary["task"]) == {"push"}
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert all(f'id="{Path(name).stem}"' in page for name in figures)  # every file left is on the page
