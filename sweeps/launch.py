@@ -36,17 +36,12 @@ _composed = False  # set once the sweeper is reached: the command line composed 
 _hydra_full_error = "0"  # the user's HYDRA_FULL_ERROR ("1": tracebacks), restored once composed
 
 
-def _joblib_runs(n_jobs: int) -> int:
-    """joblib's ``n_jobs``: that many at once; -1 one per core, -2 all cores but one, ... (joblib's rule)."""
-    return n_jobs if n_jobs > 0 else max(1, available_cores() + 1 + n_jobs)
-
-
 # How many of a sweep's n_runs train on this machine at once, read from the launcher's own settings:
 # the first key of this table that its config has decides (so a launcher YAML needs no code).
 # None: its jobs run elsewhere, each on its own allocation, and resolve threads=auto there.
 RUNS_AT_ONCE: tuple[tuple[str, Callable[[Any, int], int | None]], ...] = (
     ("partition", lambda partition, n_runs: None),  # a cluster's queue (submitit's SLURM)
-    ("n_jobs", lambda n_jobs, n_runs: _joblib_runs(int(n_jobs or -1))),  # joblib
+    ("n_jobs", lambda n_jobs, n_runs: int(n_jobs)),  # joblib (1 or more: check_launcher)
     ("array_parallelism", lambda at_most, n_runs: int(at_most or n_runs)),  # an executor's cap
     ("tasks_per_node", lambda tasks, n_runs: n_runs),  # an executor that starts every job (submitit's local)
 )  # none of them (Hydra's basic launcher): one after another
@@ -122,13 +117,15 @@ def list_runs(planned: dict, at_once: int | None) -> None:
 
 
 def check_launcher(launcher: DictConfig) -> None:
-    """A launcher's ``n_jobs`` (runs at once on this machine) must be 1 or more (SweepError, exit 2)."""
+    """A launcher's ``n_jobs`` (runs at once on this machine, which threads=auto divides the cores by) must be 1
+    or more (SweepError, exit 2): joblib's counts below 1 (its plugin's default, -1) are refused, not guessed."""
     if "n_jobs" not in launcher:
         return
     n_jobs = launcher.get("n_jobs")
     if not isinstance(n_jobs, int) or n_jobs < 1:
         raise SweepError(f"hydra.launcher.n_jobs={n_jobs}: give the number of runs to train at once, 1 or more, "
-                         f"or leave it out for one per core ({available_cores()} here)", exit_code=2)
+                         f"or ${{hersd_cores:}} for one per core ({available_cores()} here, the default of "
+                         "hydra/launcher=local)", exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:

@@ -99,9 +99,24 @@ def test_no_runs_at_once_is_one_line_saying_what_to_do_and_exit_2(tmp_path, n_jo
     result = sweep("+grid=smoke", f"hydra.launcher.n_jobs={n_jobs}", f"results_dir={tmp_path}", check=False)
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert result.stderr.strip() == (f"hersd-sweep: error: hydra.launcher.n_jobs={n_jobs}: give the number of runs "
-                                     f"to train at once, 1 or more, or leave it out for one per core "
-                                     f"({available_cores()} here)")
+                                     f"to train at once, 1 or more, or ${{hersd_cores:}} for one per core "
+                                     f"({available_cores()} here, the default of hydra/launcher=local)")
     assert not any(tmp_path.iterdir())
+
+
+def test_a_joblib_launcher_of_ones_own_without_n_jobs_is_told_what_to_set():
+    """The joblib plugin's default n_jobs, -1, is refused with the setting that gives one run per core."""
+    from hydra_plugins.hydra_joblib_launcher.config import JobLibLauncherConf
+    from omegaconf import OmegaConf
+
+    from sweeps.launch import check_launcher
+    from sweeps.plan import SweepError
+
+    with pytest.raises(SweepError) as refused:
+        check_launcher(OmegaConf.structured(JobLibLauncherConf))
+    assert refused.value.exit_code == 2 and "n_jobs=-1" in str(refused.value)
+    assert "${hersd_cores:} for one per core" in str(refused.value)
+    check_launcher(OmegaConf.structured(JobLibLauncherConf(n_jobs=2)))
 
 
 def test_help_names_the_command_and_only_the_groups_a_sweep_takes():
@@ -253,7 +268,6 @@ def test_runs_at_once_come_from_each_launchers_own_settings(idle_machine):
     assert concurrent_runs(launcher_config("hydra/launcher=slurm"), n_runs=10) is None
     assert auto_threads(launcher_config("hydra/launcher=slurm"), n_runs=10) is None
     assert auto_threads(launcher_config("hydra.launcher.n_jobs=1"), n_runs=10) == available_cores()
-    assert auto_threads(launcher_config("hydra.launcher.n_jobs=-1"), n_runs=1) == available_cores()
 
 
 USER_LAUNCHER = """# @package hydra.launcher
