@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import copy
 import pkgutil
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -94,6 +96,23 @@ def test_a_new_learner_is_one_class_the_run_asks(monkeypatch):
         check_finite(cfg, record)
     with pytest.raises(TypeError, match="two learners named 'quiet'"):
         type("Loud", (DDPG,), {"NAME": "quiet"})
+
+
+def test_a_class_of_the_learners_package_is_found_by_name_in_a_command_that_has_not_imported_the_engine():
+    """``learner.name=<NAME>`` of a class in hersd/engine/learners/ with no YAML and no entry of its own, composed
+    as hersd-train and hersd-sweep compose (the engine not imported yet): the package is imported on demand
+    (entry point group hersd.learner_modules). TD3 is that class here, once taken out of the config's table of
+    the paper's three learners (PACKAGE_LEARNERS, which the config reads without importing torch)."""
+    code = ("import sys\n"
+            "from hersd.contract import config\n"
+            "from hersd.contract.compose import compose_train\n"
+            "config.PACKAGE_LEARNERS.pop('td3')\n"
+            "assert 'hersd.engine.learners' not in sys.modules\n"
+            "cfg = compose_train(['task=reach', 'learner.name=td3'])\n"
+            "print(cfg.learner.name, type(cfg.learner.settings).__name__)\n")
+    ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stdout.split() == ["td3", "TD3Config"]
 
 
 def test_td3_target_takes_the_minimum_of_the_twin_critics_at_smoothed_target_actions():

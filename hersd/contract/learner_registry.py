@@ -2,14 +2,16 @@
 (and so not torch) until one is asked for.
 
 Every :class:`hersd.engine.learners.GoalConditionedLearner` subclass that declares a ``NAME`` registers itself in
-:data:`LEARNERS` when its module is imported (importing :mod:`hersd.engine.learners` registers the package's). A
-name is found there, then among the entry points of the group ``hersd.learners``, then as a class path
-``<module>.<Class>`` (``learner._target_``), the way schedules are found (:mod:`hersd.contract.schedules.registry`).
+:data:`LEARNERS` when its module is imported. A name is found there (after importing the packages of the entry
+point group ``hersd.learner_modules``, hersd's own learners among them, when it is not registered yet), then among
+the entry points of the group ``hersd.learners``, then as a class path ``<module>.<Class>`` (``learner._target_``),
+the way schedules are found (:mod:`hersd.contract.schedules.registry`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from importlib.metadata import entry_points
 from typing import Any
 
 from hersd.contract.errors import ConfigError
@@ -19,12 +21,13 @@ from hersd.contract.plugins import entry_point_names as declared_names
 LEARNERS: dict[str, type] = {}  # NAME -> learner class, filled as the classes are defined
 ENTRY_POINT_GROUP = "hersd.learners"  # other packages' learners: ``mytd3 = my_pkg.learners:MyTD3``
 TARGET_KEY = "learner._target_"  # a class by its path: learner._target_=<module>.<Class>
+MODULE_GROUP = "hersd.learner_modules"  # packages whose import registers learners by NAME (pyproject.toml)
 
 
 def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     """The learner class a ``learner=`` name or class path selects; ConfigError (one line, listing ``known``
     and the registered names) if none, or if it declares SETTINGS that are not a dataclass."""
-    cls = LEARNERS.get(name) or entry_point_class(ENTRY_POINT_GROUP, name)
+    cls = _registered(name) or entry_point_class(ENTRY_POINT_GROUP, name)
     if cls is None and "." in name:
         cls = class_at(name, "learner")
     if cls is None:
@@ -37,6 +40,15 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     if settings is not None and not dataclasses.is_dataclass(settings):
         raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {settings!r}")
     return cls
+
+
+def _registered(name: str) -> Any:
+    """The class registered under ``name``, or None; a name not registered yet first imports the packages of
+    :data:`MODULE_GROUP` (hersd.engine.learners, and so torch), whose classes register as they are defined."""
+    if name not in LEARNERS and "." not in name:
+        for point in entry_points(group=MODULE_GROUP):
+            point.load()
+    return LEARNERS.get(name)
 
 
 def entry_point_names() -> list[str]:
