@@ -57,7 +57,7 @@ class SpaceConfig:
 class SamplerConfig:
     """Optuna's TPE sampler."""
 
-    seed: int = 0  # TPE seed; each worker's is derived from it, its index and the study's size
+    seed: int = 0  # TPE seed; each trial's draws are seeded by (this seed, the trial's number)
     n_startup_trials: int = 10  # random trials before TPE models the results
     multivariate: bool = True  # model beta1 and beta2 jointly (they trade off along mu_eps iso-lines)
 
