@@ -1,4 +1,5 @@
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -192,3 +193,17 @@ def test_an_exponential_schedule_with_beta2_0_is_the_linear_one_and_finds_its_co
     assert all(isinstance(cfg.schedule, Linear) for cfg in made)
     assert run_dir(made[0]) == run_dir(made[1]) and run_dir(made[0]).parent.name == "linear-b1_0.25"
     assert (Path(__file__).resolve().parents[1] / run_dir(made[0]) / "run.mcap").is_file()  # a committed run
+
+
+def test_a_subclass_of_the_exponential_kind_at_beta2_0_stays_itself():
+    """Only the package's exponential at beta2 = 0 is the linear kind: a subclass's rate may be its own."""
+    from hersd.contract.schedules import Exponential
+
+    @dataclass
+    class Steeper(Exponential):
+        def rate(self, k, total_epochs, train_success=()):
+            return 1.0 - self.beta1 * (k / total_epochs) ** 2
+
+    steeper = Steeper(beta1=0.5)
+    assert steeper.equivalent() is steeper
+    assert type(Exponential(beta1=0.5).equivalent()).__name__ == "Linear"
