@@ -272,3 +272,13 @@ def test_the_control_asks_the_linear_schedule_for_its_mean_rate_over_the_runs_k(
     assert control.eps == 1 - 0.25 * 9 / 16
     with pytest.raises(ConfigError, match="success adapts to the run"):
         mean_rate({"kind": "success", "beta1": 0.25}, 200)
+
+
+@pytest.mark.parametrize("override", ["+foo=1", "+ddpg.batchsize=64", "+task.foo=1", "+bias.foo=1", "+algo.mep.foo=1"])
+def test_a_key_added_with_a_plus_that_is_no_field_is_refused_not_dropped(override):
+    """Hydra's + lets a key the schema lacks into the config, where nothing would read it: the run would train at
+    the defaults while its command shows the setting. It is refused like the same typo without the +."""
+    key = override[1:].split("=")[0]
+    with pytest.raises(ConfigError, match=rf"^{key} is not a config field \(the \+ added it"):
+        compose_train([override])
+    assert compose_train(["learner=td3", "learner.td3.policy_noise=0.1"]).learner.settings.policy_noise == 0.1

@@ -379,10 +379,30 @@ def config_record(cfg: TrainConfig) -> dict[str, Any]:
     return {**asdict(cfg), "schedule": cfg.schedule.record(), "learner": learner_record(cfg.learner)}
 
 
+def added_keys(node: DictConfig, prefix: str = "") -> list[str]:
+    """The dotted keys a ``+key=value`` override put in a node of the schema that has no such field (OmegaConf
+    would drop them unseen); the open nodes, ``schedule`` and ``learner``, check their keys themselves."""
+    schema = OmegaConf.get_type(node)
+    if not OmegaConf.is_struct(node) or not dataclasses.is_dataclass(schema):
+        return []
+    names = {item.name for item in dataclasses.fields(schema)}
+    added = []
+    for key in node:
+        child = node._get_node(key)
+        if key not in names:
+            added.append(f"{prefix}{key}")
+        elif isinstance(child, DictConfig):
+            added += added_keys(child, f"{prefix}{key}.")
+    return added
+
+
 def to_train_config(cfg: DictConfig) -> TrainConfig:
     """Composed Hydra config -> validated :class:`TrainConfig` (raises :class:`ConfigError`)."""
     from omegaconf.errors import OmegaConfBaseException
 
+    if added := added_keys(cfg):
+        raise ConfigError(f"{added[0]} is not a config field (the + added it, and no part of a run reads it); "
+                          "see --help")
     try:
         obj = OmegaConf.to_object(cfg)
     except OmegaConfBaseException as err:
