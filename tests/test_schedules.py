@@ -207,3 +207,14 @@ def test_a_subclass_of_the_exponential_kind_at_beta2_0_stays_itself():
     steeper = Steeper(beta1=0.5)
     assert steeper.equivalent() is steeper
     assert type(Exponential(beta1=0.5).equivalent()).__name__ == "Linear"
+
+
+@pytest.mark.parametrize("typed", [["schedule=linear", "schedule.beta1=1"], ["schedule=constant", "schedule.eps=1"],
+                                   ["schedule=exponential", "schedule.beta2=1"]])
+def test_a_setting_typed_as_a_whole_number_is_the_same_run_as_its_float(typed):
+    """schedule.beta1=1 and schedule.beta1=1.0 are one setting, one run folder (a float setting takes 1 as 1.0)."""
+    from hersd.contract.compose import compose_train
+    from hersd.contract.runstore import run_dir
+
+    as_float = [*typed[:1], f"{typed[1]}.0"]
+    assert run_dir(compose_train(typed)) == run_dir(compose_train(as_float))

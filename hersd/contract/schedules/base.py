@@ -62,8 +62,11 @@ class Schedule:
         for item in self.params():
             if "low" in item.metadata:
                 check_param(item, getattr(self, item.name))
-                if item.metadata["integer"] and isinstance(getattr(self, item.name), float):  # 5.0 is 5, one identity
-                    setattr(self, item.name, int(getattr(self, item.name)))
+                value = getattr(self, item.name)
+                if item.metadata["integer"] and isinstance(value, float):  # 5.0 is 5, one identity
+                    setattr(self, item.name, int(value))
+                elif not item.metadata["integer"] and isinstance(value, int) and not isinstance(value, bool):
+                    setattr(self, item.name, float(value))  # 1 is 1.0, one identity
 
     @classmethod
     def params(cls) -> list[dataclasses.Field]:
