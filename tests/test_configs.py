@@ -282,3 +282,21 @@ def test_a_key_added_with_a_plus_that_is_no_field_is_refused_not_dropped(overrid
     with pytest.raises(ConfigError, match=rf"^{key} is not a config field \(the \+ added it"):
         compose_train([override])
     assert compose_train(["learner=td3", "learner.td3.policy_noise=0.1"]).learner.settings.policy_noise == 0.1
+
+
+def test_a_learner_setting_takes_its_declared_type_or_is_refused_in_one_line():
+    """learner.td3.policy_delay=2.0 is 2 and noise_clip=1 is 1.0 (one setting, one run folder); 2.5 or a word for a
+    whole number is refused by name before any run (it used to reach the update: update_count % 2.5)."""
+    from hersd.contract.runstore import run_dir
+
+    def folder(*overrides):
+        return run_dir(compose_train(["learner=td3", *overrides]))
+
+    assert folder("learner.td3.policy_delay=2.0") == folder("learner.td3.policy_delay=2") == folder()
+    assert folder("learner.td3.noise_clip=1") == folder("learner.td3.noise_clip=1.0") != folder()
+    for value, wanted in (("2.5", "a whole number, got 2.5"), ("abc", "a whole number, got 'abc'")):
+        with pytest.raises(ConfigError, match=rf"^learner\.td3\.policy_delay must be {wanted}$"):
+            compose_train(["learner=td3", f"learner.td3.policy_delay={value}"])
+    with pytest.raises(ConfigError, match=r"^learner\.sac\.target_entropy must be a number, got 'x'$"):
+        compose_train(["learner=sac", "learner.sac.target_entropy=x"])
+    assert compose_train(["learner=sac", "learner.sac.target_entropy=null"]).learner.settings.target_entropy is None

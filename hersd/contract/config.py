@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import asdict, dataclass, field
 from typing import Any, List, Optional
 
@@ -274,7 +275,32 @@ def learner_settings(key: str, settings_class: type, section: Any) -> Any:
     unknown = sorted(set(section) - set(fields))
     _check(not unknown, f"learner.{key}.{unknown[0] if unknown else ''} is not a setting; "
            f"its settings: {', '.join(fields) or 'none'}")
-    return settings_class(**section)
+    try:
+        types = typing.get_type_hints(settings_class)
+    except (NameError, TypeError):  # annotations that do not resolve here: the class's own checks only
+        types = {}
+    return settings_class(**{name: _typed(f"learner.{key}.{name}", types.get(name), value)
+                             for name, value in section.items()})
+
+
+def _typed(name: str, declared: Any, value: Any) -> Any:
+    """A learner setting as its declared type (int, float, bool, or Optional of one): 2.0 is 2 for an int, 1 is 1.0
+    for a float, so one setting is one run folder; ConfigError (one line) for a value of another type."""
+    args = typing.get_args(declared)
+    if value is None and type(None) in args:
+        return None
+    kind = next((arg for arg in args if arg is not type(None)), declared) if args else declared
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is float and number:
+        return float(value)
+    if kind is int and number and float(value).is_integer():
+        return int(value)
+    if kind is bool and isinstance(value, bool):
+        return value
+    if kind not in (int, float, bool):  # another type: the class's own checks
+        return value
+    wanted = {int: "a whole number", float: "a number", bool: "true or false"}[kind]
+    raise ConfigError(f"{name} must be {wanted}, got {value!r}")
 
 
 def learner_record(learner: LearnerConfig) -> dict[str, Any]:
