@@ -218,3 +218,29 @@ def test_a_setting_typed_as_a_whole_number_is_the_same_run_as_its_float(typed):
 
     as_float = [*typed[:1], f"{typed[1]}.0"]
     assert run_dir(compose_train(typed)) == run_dir(compose_train(as_float))
+
+
+@pytest.mark.parametrize("declared, says", [("step", "nothing registers"), ("cosine", "is another class")])
+def test_a_class_chosen_by_its_path_declaring_a_kind_no_one_registers_for_it_is_refused(monkeypatch, declared, says):
+    """Its logs would record that kind: read back, "step" finds nothing (the report skipped every such run) and
+    "cosine" finds the package's cosine (the report pooled the two)."""
+    from hersd.contract.errors import ConfigError
+    from hersd.contract.schedules import Schedule, registry
+
+    @dataclass
+    class Step(Schedule):
+        kind = declared
+
+        def rate(self, k, total_epochs, train_success=()):
+            return 0.9
+
+    monkeypatch.setattr(registry, "class_at", lambda path, what: Step)
+    with pytest.raises(ConfigError, match=rf"^schedule my_pkg\.Step declares kind='{declared}', which {says}"):
+        registry.schedule_class("my_pkg.Step")
+
+    @dataclass
+    class Unnamed(Step):  # no kind of its own: recorded by its path
+        kind = ""
+
+    monkeypatch.setattr(registry, "class_at", lambda path, what: Unnamed)
+    assert registry.schedule_class("my_pkg.Unnamed") is Unnamed

@@ -38,6 +38,12 @@ def schedule_class(kind: str) -> type[Schedule]:
     cls = registered(kind)
     if cls is None and "." in kind:
         cls = class_at(kind, "schedule")
+        declared = getattr(cls, "__dict__", {}).get("kind")
+        if declared and registered(declared) is not cls:  # its logs would name a kind that is not this class
+            raise ConfigError(f"schedule {kind} declares kind={declared!r}, which "
+                              f"{'is another class' if registered(declared) else 'nothing registers'}: its runs "
+                              f"could not be read back by that name; remove kind (its runs are then recorded by "
+                              f"its path), or declare it as an entry point of {ENTRY_POINT_GROUP}")
     if cls is None:
         raise ConfigError(f"schedule.kind={kind!r} is unknown; choose one of: {', '.join(known_kinds())}, "
                           f"or a class: schedule.{TARGET_KEY}=<module>.<Class>")
