@@ -244,3 +244,19 @@ def test_a_class_chosen_by_its_path_declaring_a_kind_no_one_registers_for_it_is_
 
     monkeypatch.setattr(registry, "class_at", lambda path, what: Unnamed)
     assert registry.schedule_class("my_pkg.Unnamed") is Unnamed
+
+
+def test_a_schedule_class_without_dataclass_is_told_to_add_it(monkeypatch):
+    """Without @dataclass its param() settings stay Field objects: its rate was "Field(...), not in [0, 1]"."""
+    from hersd.contract.errors import ConfigError
+    from hersd.contract.schedules import Schedule, param, registry
+
+    class Step(Schedule):
+        high: float = param(0.9, 0.0, 1.0, "the rate")
+
+        def rate(self, k, total_epochs, train_success=()):
+            return self.high
+
+    monkeypatch.setattr(registry, "class_at", lambda path, what: Step)
+    with pytest.raises(ConfigError, match=r"^schedule my_pkg\.Step: put @dataclass above its class"):
+        registry.schedule_class("my_pkg.Step")

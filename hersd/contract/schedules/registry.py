@@ -4,6 +4,7 @@ import path (Hydra's ``_target_`` convention: ``schedule._target_=my_pkg.schedul
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Mapping
 
 from hersd.contract.errors import ConfigError
@@ -49,6 +50,9 @@ def schedule_class(kind: str) -> type[Schedule]:
                           f"or a class: schedule.{TARGET_KEY}=<module>.<Class>")
     if not (isinstance(cls, type) and issubclass(cls, Schedule)):
         raise ConfigError(f"schedule {kind} is not a hersd.contract.schedules.Schedule subclass")
+    if any(isinstance(value, dataclasses.Field) for value in vars(cls).values()):  # param() fields left unprocessed
+        raise ConfigError(f"schedule {kind}: put @dataclass above its class (from dataclasses import dataclass): "
+                          "its param() settings are dataclass fields")
     if cls.rate is Schedule.rate:
         raise ConfigError(f"schedule {kind} defines no rate(self, k, total_epochs, train_success=()); "
                           "a schedule needs it (tag and label have defaults)")
