@@ -153,3 +153,19 @@ def test_a_setting_the_learner_lacks_is_one_line(user_late):
         TrainConfig(learner={"_target_": "user_late.TD3Late", "td3late": {"start": 1}})
     with pytest.raises(ConfigError, match=r"^learner\.td3lat is not a setting of learner user_late\.TD3Late; "):
         TrainConfig(learner={"_target_": "user_late.TD3Late", "td3lat": {"actor_start": 1}})
+
+
+def test_train_help_lists_the_settings_of_the_learner_the_command_names(user_late, capsys):
+    """``learner._target_=<module>.<Class> --help``: its settings under its own key, the inherited ones with their
+    parent's documentation; a learner that cannot be found is one line and exit 2."""
+    from hersd.engine.cli import main as train_main
+
+    train_main(["learner._target_=user_late.TD3Late", "--help"])
+    shown = capsys.readouterr().out.split("learners named on the command line (their settings):\n")[1].splitlines()
+    assert shown[0] == "  user_late.TD3Late:"
+    assert shown[1].split() == ["learner.td3late.policy_noise=0.2", "std", "of", "the", "Gaussian", "noise", "on",
+                                "target", "actions,", "as", "a", "share", "of", "max", "action"]
+    assert shown[4].split()[:2] == ["learner.td3late.actor_start=4", "the"]
+    with pytest.raises(SystemExit) as ended:
+        train_main(["learner._target_=nosuch.X", "--help"])
+    assert ended.value.code == 2 and capsys.readouterr().err.startswith("hersd-train: error: learner class nosuch.X")

@@ -3,7 +3,8 @@
 ``hersd-train task=push schedule=linear schedule.beta1=0.25 seed=0 epochs=50``; re-running
 the same command resumes an interrupted run. ``--help`` is generated from the schema
 (:mod:`hersd.contract.config`, each field's comment), the config groups under ``conf/`` and each schedule class
-(the registered kinds, and a class of your own the command names: ``schedule._target_=<module>.<Class> --help``).
+(the registered kinds, and a class of your own the command names: ``schedule._target_=<module>.<Class> --help``),
+and a learner the command names beyond the package's (``learner._target_=<module>.<Class> --help``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from hersd.contract.compose import compose_train, explain_config_error, group_choices
-from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig
+from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig, learner_key, learner_settings_class
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import TARGET_KEY, known_kinds, schedule_class
 from hersd.contract.runstore import RunLockedError, check_writable, run_dir
@@ -26,10 +27,23 @@ _FIELD_LINE = re.compile(r"^\s+(\w+):[^=]+=.*?(?:#\s*(.*))?$")
 
 
 def field_docs(schema: type) -> dict[str, str]:
-    """Field name -> its documentation: the comment on the field's line, else the comment lines above it."""
+    """Field name -> its documentation: the comment on the field's line, else the comment lines above it; a
+    field a dataclass inherits keeps its parent's (a learner's settings subclassing TD3Config)."""
+    docs: dict[str, str] = {}
+    for cls in reversed([cls for cls in schema.__mro__ if dataclasses.is_dataclass(cls)]):
+        docs.update(_own_field_docs(cls))
+    return docs
+
+
+def _own_field_docs(schema: type) -> dict[str, str]:
+    """:func:`field_docs` of the fields a class's own source declares ({} when its source is not at hand)."""
+    try:
+        source = inspect.getsource(schema)
+    except (OSError, TypeError):
+        return {}
     docs: dict[str, str] = {}
     above: list[str] = []
-    for line in inspect.getsource(schema).splitlines():
+    for line in source.splitlines():
         stripped = line.strip()
         if stripped.startswith("#"):
             above.append(stripped.lstrip("# "))
@@ -82,9 +96,25 @@ def chosen_schedules(argv: list[str]) -> list[str]:
     return [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
 
 
+def learner_lines(argv: list[str]) -> list[str]:
+    """The settings (``learner.<key>.<field>=default  doc``) of each learner the command line names
+    (``learner=``, ``learner.name=``, ``learner._target_=``) beyond the package's, whose settings the keys list."""
+    keys = ("learner", "learner.name", f"learner.{TARGET_KEY}")
+    named = [name for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys for name in arg.split("=", 1)[1].split(",")]
+    lines = []
+    for name in dict.fromkeys(named):
+        if name in PACKAGE_LEARNERS:
+            continue
+        recorded, settings = learner_settings_class(name)
+        lines.append(f"  {recorded}:" + ("" if settings else " no settings"))
+        lines += schema_lines(settings, f"  learner.{learner_key(recorded)}.") if settings else []
+    return ["", "learners named on the command line (their settings):", *lines] if lines else []
+
+
 def usage(argv: list[str] = ()) -> str:
     """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
-    with the package's kinds (ConfigError if it cannot be imported)."""
+    with the package's kinds, and a learner it names beyond the package's with its settings (ConfigError if
+    either cannot be found)."""
     groups = [f"  {group}={'|'.join(group_choices(group))}" for group in GROUPS]
     return "\n".join([
         "usage: hersd-train [KEY=VALUE ...]", "",
@@ -96,6 +126,7 @@ def usage(argv: list[str] = ()) -> str:
         *schema_lines(TrainConfig), "",
         "schedules (eps(k): the relabel rate of epoch k = 1..K; schedule=<kind> or schedule.kind=<kind>, then its settings):",
         *schedule_lines(chosen_schedules(argv)),
+        *learner_lines(argv),
     ])
 
 
