@@ -260,3 +260,18 @@ def test_a_schedule_class_without_dataclass_is_told_to_add_it(monkeypatch):
     monkeypatch.setattr(registry, "class_at", lambda path, what: Step)
     with pytest.raises(ConfigError, match=r"^schedule my_pkg\.Step: put @dataclass above its class"):
         registry.schedule_class("my_pkg.Step")
+
+
+def test_a_subclass_of_a_package_kind_names_its_own_folder_and_label():
+    """FloorLinear(Linear) with a setting of its own is not linear: its folder and label were linear's
+    (linear-b1_0.5, "linear b1=0.5"), its setting in neither."""
+    from hersd.contract.schedules import Linear, param
+
+    @dataclass
+    class FloorLinear(Linear):
+        floor: float = param(0.1, 0.0, 1.0, "the lowest rate")
+
+    floor = FloorLinear(beta1=0.5)
+    assert floor.tag() == "floorlinear-beta1_0.5-mean_rate_null-floor_0.1"
+    assert floor.label() == "floorlinear beta1=0.5 mean_rate=null floor=0.1"
+    assert (Linear(beta1=0.5).tag(), Linear(beta1=0.5).label()) == ("linear-b1_0.5", "linear b1=0.5")

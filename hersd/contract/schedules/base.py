@@ -58,6 +58,14 @@ class Schedule:
     line: ClassVar[str] = "-"  # matplotlib line style of its curves in the report
     flat_record: ClassVar[bool] = False  # its logs hold FLAT_RECORD's fields too (the paper's kinds)
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass of a kind that names its own folders and labels (linear's ``linear-b1_0.25``) names its own
+        by default, the class name and every setting, unless it defines tag or label: it is another schedule."""
+        super().__init_subclass__(**kwargs)
+        for method in ("tag", "label"):
+            if method not in vars(cls) and getattr(cls, method) is not getattr(Schedule, method):
+                setattr(cls, method, getattr(Schedule, method))
+
     def __post_init__(self) -> None:
         for item in self.params():
             if "low" in item.metadata:
