@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from helpers import TINY, command
 
+from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_run
 
 # A user's module: TD3 whose actor waits ``actor_start`` updates, its settings TD3's and that one.
@@ -169,3 +170,16 @@ def test_train_help_lists_the_settings_of_the_learner_the_command_names(user_lat
     with pytest.raises(SystemExit) as ended:
         train_main(["learner._target_=nosuch.X", "--help"])
     assert ended.value.code == 2 and capsys.readouterr().err.startswith("hersd-train: error: learner class nosuch.X")
+
+
+def test_a_class_chosen_by_its_path_that_declares_a_name_nothing_finds_is_refused(user_late):
+    """RegisteredLate declares NAME = "late": chosen by its path its logs would record "late", which a fresh
+    process (hersd-render of its runs) finds only through its entry point."""
+    from hersd.contract.learner_registry import learner_class
+
+    with pytest.raises(ConfigError, match=r"^learner user_late\.RegisteredLate declares NAME='late', which a later"):
+        learner_class("user_late.RegisteredLate")
+    assert learner_class("user_late.TD3Late").__name__ == "TD3Late"  # no NAME: recorded by its path
+    assert learner_class("hersd.engine.learners.td3.TD3").NAME == "td3"  # the package's, found by its name
+    declare_entry_point(user_late)
+    assert learner_class("user_late.RegisteredLate").__name__ == "RegisteredLate"

@@ -30,6 +30,11 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     cls = _registered(name) or entry_point_class(ENTRY_POINT_GROUP, name)
     if cls is None and "." in name:
         cls = class_at(name, "learner")
+        declared = vars(cls).get("NAME") if isinstance(cls, type) else None
+        if declared and not _found_by_name(declared, cls):  # its logs would record a name nothing finds
+            raise ConfigError(f"learner {name} declares NAME={declared!r}, which a later command (hersd-render "
+                              f"of its runs) could not find: remove NAME (its runs are then recorded by its "
+                              f"path), or declare it as an entry point of {ENTRY_POINT_GROUP}")
     if cls is None:
         names = sorted({*known, *LEARNERS, *entry_point_names()})
         raise ConfigError(f"learner={name!r} is unknown; choose one of: {', '.join(names)}, "
@@ -40,6 +45,14 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
     if settings is not None and not dataclasses.is_dataclass(settings):
         raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {settings!r}")
     return cls
+
+
+def _found_by_name(name: str, cls: type) -> bool:
+    """Whether a fresh process finds ``cls`` by ``name``: an entry point of that name, or a class of the packages
+    of :data:`MODULE_GROUP` (which register as they are imported)."""
+    packages = [point.value for point in entry_points(group=MODULE_GROUP)]
+    return entry_point_class(ENTRY_POINT_GROUP, name) is cls or any(
+        cls.__module__ == package or cls.__module__.startswith(f"{package}.") for package in packages)
 
 
 def _registered(name: str) -> Any:
