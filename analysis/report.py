@@ -24,7 +24,7 @@ Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 
 are read, and the figures drawn, in worker processes, one per core (analysis.workers); the
 modules that compute and draw (scipy, matplotlib) are imported while the logs are read, and the statistics
 and table files are computed and written while the figures are drawn. Figure and table files an earlier
-report left in figures/ and tables/ that this one did not write are deleted.
+report left in figures/ and tables/ that this one did not write are deleted (only where a report was).
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ if TYPE_CHECKING:
 
 DEFAULT_WINDOW = 50
 FORMATS = ("png", "svg", "pdf")
+REPORT_TITLE = "<title>hersd report</title>"  # the page's title, which marks a folder as a report's
 DPI = 100
 FAST_PNG = {"compress_level": 1}  # zlib level 1: files ~15 % larger than the default 6, encoded several times faster
 MIME = {"png": "image/png", "svg": "image/svg+xml"}
@@ -299,7 +300,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
                       html_table(study.best.drop(columns=["run_dirs"], errors="ignore"),  # long: csv only
                                  float_format="{:.4g}")]
     parts += ["<h2>Runs</h2>", f"<p>{TABLE_NOTES['runs']}</p>", *_runs_html(analysis), *provenance_html(provenance)]
-    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>hersd report</title>"
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'>{REPORT_TITLE}"
             f"<style>{PAGE_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
 
 
@@ -493,6 +494,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
     folder = Path(folder)
     out = Path(out) if out is not None else folder / "report"
+    earlier_report = _is_report(out)  # only a report's own folders are cleaned of what it no longer writes
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
@@ -533,15 +535,23 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     animations = _copy_animations(analysis, folder, out / "figures")
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
                                 animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
-    _remove_stale(out, [*paths, *written])
+    if earlier_report:
+        _remove_stale(out, [*paths, *written])
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
+
+
+def _is_report(out: Path) -> bool:
+    """Whether ``out`` holds a page hersd-report wrote (its title), so its figures/ and tables/ are a report's."""
+    page = out / "index.html"
+    return page.is_file() and REPORT_TITLE in page.read_text(encoding="utf-8", errors="replace")[:500]
 
 
 def _remove_stale(out: Path, written: list[Path]) -> None:
     """Delete the figure and table files an earlier report left in ``out``'s figures/ and tables/ that this one
     did not write (a figure of a task filtered out, a table that no longer applies), so every file there is of
-    this report. search/ is left alone: with ``--out`` at the results folder it holds the study storages."""
+    this report; only where an earlier report was (:func:`_is_report`: not a folder of the user's own that
+    --out names). search/ is left alone: with ``--out`` at the results folder it holds the study storages."""
     kept = set(written)
     for folder in ("figures", "tables"):
         for path in (out / folder).glob("*"):

@@ -300,3 +300,16 @@ def test_a_learner_setting_takes_its_declared_type_or_is_refused_in_one_line():
     with pytest.raises(ConfigError, match=r"^learner\.sac\.target_entropy must be a number, got 'x'$"):
         compose_train(["learner=sac", "learner.sac.target_entropy=x"])
     assert compose_train(["learner=sac", "learner.sac.target_entropy=null"]).learner.settings.target_entropy is None
+
+
+def test_a_learner_setting_of_another_declared_type_is_left_to_its_class():
+    """Only int, float, bool and Optional of one are coerced: List[int] or Union[int, str] values pass as given."""
+    from typing import List, Union
+
+    from hersd.contract.config import _typed
+
+    assert _typed("learner.x.widths", List[int], [64, 64]) == [64, 64]
+    assert _typed("learner.x.mix", Union[int, float], 0.5) == 0.5
+    assert _typed("learner.x.mode", Union[int, str], "abc") == "abc"
+    with pytest.raises(ConfigError, match=r"^learner\.x\.scale must be a number, got 1000"):
+        _typed("learner.x.scale", float, 10 ** 400)  # too large for a float: one line, not OverflowError

@@ -311,3 +311,15 @@ def test_a_second_report_into_the_same_folder_leaves_no_file_of_the_first(sweep,
     assert set(summary["task"]) == {"push"}
     page = (out / "index.html").read_text(encoding="utf-8")
     assert all(f'id="{Path(name).stem}"' in page for name in figures)  # every file left is on the page
+
+
+def test_a_folder_of_ones_own_given_as_out_keeps_its_files(sweep, tmp_path):
+    """--out at a folder that held no report (a paper's folder with figures/ and tables/ of its own): nothing of
+    it is deleted."""
+    out = tmp_path / "paper"
+    (out / "figures").mkdir(parents=True)
+    (out / "tables").mkdir()
+    (out / "figures" / "fig1.pdf").write_bytes(b"%PDF")
+    (out / "tables" / "notes.md").write_text("mine", encoding="utf-8")
+    assert report_main([str(sweep), "--out", str(out), "--task", "push"]) == 0
+    assert (out / "figures" / "fig1.pdf").exists() and (out / "tables" / "notes.md").exists()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import typing
 from dataclasses import asdict, dataclass, field
 from typing import Any, List, Optional
@@ -289,11 +290,13 @@ def _typed(name: str, declared: Any, value: Any) -> Any:
     args = typing.get_args(declared)
     if value is None and type(None) in args:
         return None
-    kind = next((arg for arg in args if arg is not type(None)), declared) if args else declared
+    members = [arg for arg in args if arg is not type(None)]
+    is_optional = typing.get_origin(declared) is typing.Union and len(members) == 1
+    kind = members[0] if is_optional else declared  # List[int], Union[int, str]: another type
     number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if kind is float and number:
+    if kind is float and number and (isinstance(value, float) or abs(value) <= sys.float_info.max):
         return float(value)
-    if kind is int and number and float(value).is_integer():
+    if kind is int and (isinstance(value, int) and number or isinstance(value, float) and value.is_integer()):
         return int(value)
     if kind is bool and isinstance(value, bool):
         return value
