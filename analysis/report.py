@@ -494,7 +494,6 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
     folder = Path(folder)
     out = Path(out) if out is not None else folder / "report"
-    earlier_report = _is_report(out)  # only a report's own folders are cleaned of what it no longer writes
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
@@ -533,10 +532,9 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     start = time.perf_counter()
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
+    _remove_stale(out, [*paths, *written])  # before the page: its title says whether an earlier report was here
     index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
                                 animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
-    if earlier_report:
-        _remove_stale(out, [*paths, *written])
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
@@ -552,6 +550,8 @@ def _remove_stale(out: Path, written: list[Path]) -> None:
     did not write (a figure of a task filtered out, a table that no longer applies), so every file there is of
     this report; only where an earlier report was (:func:`_is_report`: not a folder of the user's own that
     --out names). search/ is left alone: with ``--out`` at the results folder it holds the study storages."""
+    if not _is_report(out):
+        return
     kept = set(written)
     for folder in ("figures", "tables"):
         for path in (out / folder).glob("*"):
