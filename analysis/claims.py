@@ -101,7 +101,7 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     at = f"{seeds} v {versus_seeds}"
     row |= {"hersd": f"{words} {_number(value)} ({claim.config}) vs {_number(versus_value)} ({claim.versus})",
             "seeds": at}
-    direction = (value < versus_value) if lower_better else (value > versus_value)
+    direction = _better(value, versus_value, lower_better)
     two_sided = claim.alike or claim.statistic == "bias_real"
     if claim.statistic == "bias_real":
         p = p_better = p_worse = float(_pair_row(bias_tests[bias_tests["goal_type"] == "real"], claim)["p_two_sided"])
@@ -125,6 +125,14 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     else:
         verdict = "not reproduced: the other way, not significant"
     return row | {"verdict": verdict}
+
+
+def _better(value: float, versus_value: float, lower_better: bool) -> bool:
+    """Whether the configuration's median is the better one; a level never reached (NaN) comes after any epoch."""
+    if lower_better:
+        value, versus_value = (math.inf if math.isnan(v) else v for v in (value, versus_value))
+        return value < versus_value
+    return value > versus_value
 
 
 def _neither_learns(statistic: str, value: float, versus_value: float) -> str | None:

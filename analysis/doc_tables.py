@@ -37,7 +37,7 @@ import pandas as pd
 
 from analysis.claims import claims_markdown, permutation_words
 from analysis.seeds import seed_markdown
-from analysis.tables import COLUMNS, FLOAT_FORMAT, cell_text, column_header
+from analysis.tables import cell_text, column_formats, column_header
 from hersd.contract.tasks import task_title
 
 DEFAULT_TABLES = Path("results/report/tables")
@@ -163,7 +163,7 @@ def report_table_markdown(table: pd.DataFrame, match: dict[str, str], columns: S
     if chosen.empty:
         raise ValueError(f"no row with {', '.join(f'{key}={value}' for key, value in match.items())}")
     shown = list(columns) if columns else [name for name in table.columns if name not in match]
-    formats = [(COLUMNS[name].number if name in COLUMNS else None) or FLOAT_FORMAT for name in shown]
+    formats = column_formats(shown)
     lines = ["| " + " | ".join(column_header(name) for name in shown) + " |", "| --- " * len(shown) + "|"]
     lines += ["| " + " | ".join(cell_text(value, form) for value, form in zip(row, formats)) + " |"
               for row in chosen[shown].itertuples(index=False)]

@@ -99,6 +99,7 @@ class RunTable:
     skipped: list[str] = field(default_factory=list)
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
     missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
+    copies: list[str] = field(default_factory=list)  # one line per second log of a run already read, left out
 
 
 class MissingSchedule(NamedTuple):
@@ -300,7 +301,7 @@ class LogReading:
         by_path = {path: log for batch, logs in zip(self._batches, self._reading.results())
                    for path, log in zip(batch, logs)}
         logs = [by_path[path] for path in self.paths]
-        readable = [log for log in logs if isinstance(log, ReadLog)]
+        readable, copies = one_log_per_run([log for log in logs if isinstance(log, ReadLog)])
         missing = missing_schedule_lines([log for log in logs if isinstance(log, MissingSchedule)])
         if not readable:
             raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable"
@@ -313,8 +314,19 @@ class LogReading:
             raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
                                    f"algos present: {', '.join(found_algos)})")
         table = _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
-        table.missing_schedules = missing
+        table.missing_schedules, table.copies = missing, copies
         return table
+
+
+def one_log_per_run(logs: list[ReadLog]) -> tuple[list[ReadLog], list[str]]:
+    """One log per run (``run_id``: config and seed), so a copied folder is not a second seed: the complete
+    one, else the one with the most epochs; and a line per copy left out."""
+    kept: dict[str, ReadLog] = {}
+    for log in sorted(logs, key=lambda log: (not log.row["complete"], -log.row["epochs_done"])):
+        kept.setdefault(log.row["run_id"], log)
+    copies = [f"{log.row['path']}: a copy of run {log.row['run_id']} ({kept[log.row['run_id']].row['path']}, "
+              "the one read), left out" for log in logs if kept[log.row["run_id"]] is not log]
+    return [log for log in logs if kept[log.row["run_id"]] is log], copies
 
 
 def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:

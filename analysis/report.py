@@ -268,9 +268,9 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
              f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
              f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
     skipped = [f"log {line}" for line in table.skipped] + [f"study storage {line}" for line in studies.skipped]
-    skipped += table.missing_schedules
+    skipped += table.missing_schedules + table.copies
     if skipped:
-        parts.append("<p>Skipped, unreadable:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
+        parts.append("<p>Skipped:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")
     if not claims.empty:
         parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(_titled(claims))]
@@ -497,7 +497,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
-    for line in [*(f"skipped unreadable log {line}" for line in table.skipped), *table.missing_schedules]:
+    for line in [*(f"skipped unreadable log {line}" for line in table.skipped), *table.missing_schedules,
+                 *table.copies]:
         warn(f"warning: {line}")
     runs = table.runs
     log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} "

@@ -10,7 +10,7 @@ from __future__ import annotations
 import html
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Iterable, Mapping
 
 import pandas as pd
 
@@ -77,6 +77,7 @@ COLUMNS: dict[str, Column] = {
     "versus_bias": Column("versus' mean bias (Q minus return)", BIAS),
     "difference": Column("difference of the bias", BIAS),
     "p_two_sided": Column("p (two-sided)", PROBABILITY),
+    "p": Column("p", SMALL_P),  # the claims table's test
     # the run list (analysis.report): one run's own numbers
     "run_folder": Column("run folder"),
     "seed": Column("seed"),
@@ -128,10 +129,18 @@ def _unbroken(text: str) -> str:
                     else html.escape(word) for word in text.split(" "))
 
 
+def column_formats(names: Iterable[str], float_format: str = FLOAT_FORMAT,
+                   columns: Mapping[str, Column] = COLUMNS) -> list[str]:
+    """The number format of each column: its own in ``columns``, else ``float_format``."""
+    return [(columns[name].number if name in columns else None) or float_format for name in names]
+
+
 def markdown_table(table: pd.DataFrame, float_format: str = FLOAT_FORMAT) -> str:
-    """A GitHub-flavoured Markdown table of ``table`` (header = its columns, one line per row)."""
+    """A GitHub-flavoured Markdown table of ``table`` (header = its columns, one line per row), numbers at their
+    column's decimals as on the page (:data:`COLUMNS`, else ``float_format``)."""
     lines = ["| " + " | ".join(map(str, table.columns)) + " |", "|" + "---|" * len(table.columns)]
-    lines += ["| " + " | ".join(cell_text(value, float_format) for value in row) + " |"
+    formats = column_formats(table.columns, float_format)
+    lines += ["| " + " | ".join(cell_text(value, fmt) for fmt, value in zip(formats, row)) + " |"
               for row in table.itertuples(index=False)]
     return "\n".join(lines) + "\n"
 
@@ -149,7 +158,7 @@ def html_table(table: pd.DataFrame, float_format: str = FLOAT_FORMAT, epochs: in
     attributes = [" class=text" if text else "" for text in is_text]
     head = "".join(f"<th{attribute}>{_unbroken(column_header(name, epochs, columns))}</th>"
                    for name, attribute in zip(table.columns, attributes))
-    formats = [(columns[name].number if name in columns else None) or float_format for name in table.columns]
+    formats = column_formats(table.columns, float_format, columns)
     tips = [None if titles is None or name not in titles else list(titles[name]) for name in table.columns]
     rows = []
     for index, row in enumerate(table.itertuples(index=False)):

@@ -141,10 +141,10 @@ def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, ca
 def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
     """Each completed epoch counts once: a truncated log up to its damage, a resumed run's
     rewritten epoch with its later value."""
-    config = make_config(epochs=6)
-    write_run(tmp_path / "complete", config, np.linspace(0, 1, 6))
-    truncated = write_run(tmp_path / "truncated", config, np.linspace(0, 1, 6))
+    write_run(tmp_path / "complete", make_config(epochs=6), np.linspace(0, 1, 6))
+    truncated = write_run(tmp_path / "truncated", make_config(epochs=6, seed=1), np.linspace(0, 1, 6))
     _truncate_inside_epoch(truncated, 5)
+    config = make_config(epochs=6, seed=2)
     resumed = write_run(tmp_path / "resumed", config, np.linspace(0, 0.5, 4), complete=False)
     previous = read_run(resumed)
     writer = RunLogWriter(resumed, {**previous.meta, "resumed_from_epoch": 3}, previous=previous)
@@ -194,6 +194,24 @@ def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch, 
     assert readers and os.getpid() not in readers  # every log read in another process
     pd.testing.assert_frame_equal(forked.runs, here.runs)
     pd.testing.assert_frame_equal(forked.epochs, here.epochs)
+
+
+def test_copies_of_one_run_count_once_the_complete_or_longest_read(tmp_path, capsys):
+    """A copied run folder is the same run (run_id), not another seed: one is read, each copy named."""
+    config = make_config(epochs=6)
+    write_run(tmp_path / "a_partial", config, np.linspace(0, 0.5, 4), complete=False)
+    write_run(tmp_path / "b_run", config, np.linspace(0, 1, 6))
+    write_run(tmp_path / "c_backup", config, np.linspace(0, 1, 6))
+    write_run(tmp_path / "d_other_seed", make_config(epochs=6, seed=1), np.linspace(0, 1, 6))
+    table = load_runs(tmp_path)
+    assert sorted(table.runs["path"]) == ["b_run/run.mcap", "d_other_seed/run.mcap"]
+    assert len(table.epochs) == 12 and not table.skipped
+    assert [line.split(":")[0] for line in table.copies] == ["a_partial/run.mcap", "c_backup/run.mcap"]
+    assert all("(b_run/run.mcap, the one read), left out" in line for line in table.copies)
+    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"warning: {line}" for line in table.copies]
+    assert "c_backup/run.mcap: a copy of run" in (tmp_path / "report" / "index.html").read_text()
 
 
 def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp_path, capsys):

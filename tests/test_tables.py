@@ -47,3 +47,12 @@ def test_text_cells_break_only_at_spaces_and_carry_their_tooltips():
             "<span class=word>seed0-64e236fe</span></td>") in page
     assert "<td class=text>in progress (epoch 39 of 200)</td>" in page  # no hyphen, no slash: plain
     assert "<td class=text>success b1=0.25 <span class=word>(task.env_id=Fetch-Push/v4)</span></td>" in page
+
+
+def test_the_md_files_and_the_page_give_a_column_the_same_digits():
+    """A p of 1/10000 and the control's mu_eps 0.874375 are not rounded to 0.000 and 0.874 in the .md files."""
+    table = pd.DataFrame({"config": ["linear"], "mu_eps": [0.874375], "smallest_p": [1e-4], "p": [0.0079365],
+                          "auc": [0.71234]})
+    assert markdown_table(table).splitlines()[2] == "| linear | 0.8744 | 0.0001 | 0.0079 | 0.712 |"
+    page = html_table(table)
+    assert all(f">{cell}</td>" in page for cell in ("0.8744", "0.0001", "0.0079", "0.712"))
