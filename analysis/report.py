@@ -497,8 +497,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
-    for line in [*(f"skipped unreadable log {line}" for line in table.skipped), *table.missing_schedules,
-                 *table.copies]:
+    for line in table.warnings():
         warn(f"warning: {line}")
     runs = table.runs
     log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} "

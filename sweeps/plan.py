@@ -104,8 +104,13 @@ def grid_stages(params: Any) -> list[list[dict[str, str]]]:
 
 
 def seed_of(job: list[str]) -> str | None:
-    """The ``seed=`` value a job's overrides set (the last one), None if they set none."""
-    values = [override.split("=", 1)[1] for override in job if override.split("=", 1)[0].lstrip("+~") == "seed"]
+    """The ``seed=`` value a job's overrides set (the last one), None if they set none; SweepError (one line)
+    for ``~seed``, which would leave a run without its seed."""
+    keys = [(override.partition("=")[0], override.partition("=")[2]) for override in job]
+    if any(key == "~seed" for key, _ in keys):
+        raise SweepError("~seed deletes the runs' seed: give seed=N (or seeds=N for seeds 0..N-1) instead",
+                         exit_code=2)
+    values = [value for key, value in keys if key.lstrip("+") == "seed"]
     return values[-1] if values else None
 
 

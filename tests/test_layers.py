@@ -10,6 +10,7 @@ import ast
 import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -158,6 +159,28 @@ def test_the_contract_analysis_and_the_sweep_planner_load_neither_torch_nor_mujo
             f"heavy = [m for m in {HEAVY!r} if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+# Entry point groups whose packages a layer loads by configuration (pyproject.toml), though it may not import them:
+# group -> (the layer that loads it, the layer its packages lie in). docs/ARCHITECTURE.md names each.
+LOADED_BY_CONFIGURATION = {"hersd.learner_modules": ("contract", "engine")}
+
+
+def test_an_entry_point_reaches_a_layer_up_only_as_the_architecture_doc_says():
+    """pyproject.toml's entry points are imports by configuration: a group naming modules of a layer that the
+    layer loading the group may not import is listed above and in docs/ARCHITECTURE.md, nothing else."""
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["entry-points"]
+    loaders = {group: {layer(module_name(path)) for path in files() if repr(group) in path.read_text(encoding="utf-8")
+                       or f'"{group}"' in path.read_text(encoding="utf-8")} for group in declared}
+    found = {}
+    for group, points in declared.items():
+        for loader in loaders[group]:
+            for target in {layer(value.partition(":")[0]) for value in points.values()} - {None}:
+                if target not in MAY_IMPORT[loader]:
+                    found[group] = (loader, target)
+    assert found == LOADED_BY_CONFIGURATION
+    doc = (ROOT / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    assert all(f"`{group}`" in doc for group in found)
 
 
 def defined_names(path: Path) -> set[str]:

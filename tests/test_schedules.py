@@ -1,4 +1,5 @@
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -195,6 +196,28 @@ def test_an_exponential_schedule_with_beta2_0_is_the_linear_one_and_finds_its_co
     assert (Path(__file__).resolve().parents[1] / run_dir(made[0]) / "run.mcap").is_file()  # a committed run
 
 
+@pytest.mark.parametrize("settings, rate", [
+    (["schedule.kind=linear", "schedule.beta1=0"], 1.0),
+    (["schedule.kind=exponential", "schedule.beta1=0", "schedule.beta2=0.5"], 1.0),
+    (["schedule.kind=exponential", "schedule.beta1=0.0", "schedule.beta2=0"], 1.0),
+    (["schedule.kind=cosine", "schedule.start=0.7", "schedule.end=0.7"], 0.7),
+])
+def test_settings_that_make_a_constant_rate_file_their_runs_as_that_constant(settings, rate):
+    """linear beta1 = 0, exponential beta1 = 0 and cosine start = end were three folders of one constant rate."""
+    from hersd.contract.compose import compose_train
+    from hersd.contract.runstore import run_dir
+    from hersd.contract.schedules import Constant, Cosine, Exponential, Linear
+
+    made, constant = (compose_train(["task=push", "epochs=20", *schedule]) for schedule in (
+        settings, ["schedule=constant", f"schedule.eps={rate}"]))
+    assert type(made.schedule) is Constant and run_dir(made) == run_dir(constant)
+    given = {"linear": Linear(), "exponential": Exponential(beta2=0.5), "cosine": Cosine(start=0.7, end=0.7)}
+    kind = settings[0].removeprefix("schedule.kind=")
+    as_given = given[kind] if kind == "cosine" else type(given[kind])(**{**vars(given[kind]), "beta1": 0.0})
+    assert list(as_given.epoch_rates(20)) == list(made.schedule.epoch_rates(20)) == [rate] * 20  # bit for bit
+    assert Linear(mean_rate=1.0).equivalent() == Linear(mean_rate=1.0)  # beta1 not yet solved: itself
+
+
 def test_a_subclass_of_the_exponential_kind_at_beta2_0_stays_itself():
     """Only the package's exponential at beta2 = 0 is the linear kind: a subclass's rate may be its own."""
     from hersd.contract.schedules import Exponential
@@ -275,3 +298,32 @@ def test_a_subclass_of_a_package_kind_names_its_own_folder_and_label():
     assert floor.tag() == "floorlinear-beta1_0.5-mean_rate_null-floor_0.1"
     assert floor.label() == "floorlinear beta1=0.5 mean_rate=null floor=0.1"
     assert (Linear(beta1=0.5).tag(), Linear(beta1=0.5).label()) == ("linear-b1_0.5", "linear b1=0.5")
+
+
+@pytest.mark.parametrize("rate, taken", [(np.where(True, 0.9, 0.5), 0.9), (np.int64(1), 1.0), (np.float32(0.5), 0.5),
+                                         (np.array([0.25]), 0.25)])
+def test_a_rate_given_as_a_numpy_scalar_or_0_d_array_is_taken(rate, taken):
+    """np.where(k <= k0, 0.9, 0.5) is a 0-d array: it was refused as "is 0.9, not in [0, 1]"."""
+    from hersd.contract.schedules import Schedule
+
+    @dataclass
+    class Numpy(Schedule):
+        def rate(self, k, total_epochs, train_success=()):
+            return rate
+
+    assert Numpy().checked_rate(1, 10) == taken and type(Numpy().checked_rate(1, 10)) is float
+
+
+@pytest.mark.parametrize("rate, shown", [("0.9", "'0.9', a str"), (True, "True, a bool"), (1.5, "1.5"),
+                                         (math.nan, "nan")])
+def test_a_rate_that_is_no_number_in_0_1_says_what_it_is(rate, shown):
+    from hersd.contract.schedules import Schedule
+    from hersd.contract.schedules.base import ScheduleRateError
+
+    @dataclass
+    class Odd(Schedule):
+        def rate(self, k, total_epochs, train_success=()):
+            return rate
+
+    with pytest.raises(ScheduleRateError, match=rf"its rate at epoch 1 of 10 is {re.escape(shown)}, not in \[0, 1\]"):
+        Odd().checked_rate(1, 10)

@@ -108,6 +108,14 @@ def test_seeds_sweeps_seed_unless_the_command_sets_it(tmp_path, args, seeds):
     assert [int(run.name.split("-")[0].removeprefix("seed")) for run in runs] == seeds
 
 
+def test_deleting_the_seed_is_one_line_saying_what_to_give():
+    """``~seed`` was an IndexError traceback (exit 1)."""
+    assert seed_by_seed([[["task=reach", "seed=1"]]]) == [["task=reach", "seed=1"]]
+    with pytest.raises(SweepError, match=r"^~seed deletes the runs' seed: give seed=N") as caught:
+        seed_by_seed([[["task=reach", "~seed"]]])
+    assert caught.value.exit_code == 2
+
+
 CHECKED_SWEEP = """
 from hersd.contract.config import config_record
 from sweeps import plan

@@ -5,6 +5,9 @@ convention: ``my_pkg.schedules.Step``)."""
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import traceback
+import types
 from importlib.metadata import entry_points
 from typing import Any
 
@@ -27,6 +30,25 @@ def class_at(path: str, what: str) -> Any:
     "schedule") if its module cannot be imported or lacks it."""
     module, _, name = path.rpartition(".")
     try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError, ValueError) as err:
+        found = importlib.import_module(module)
+    except (ImportError, ValueError) as err:
         raise ConfigError(f"{what} class {path} cannot be imported ({err}); is its module on PYTHONPATH?") from None
+    except Exception as err:  # the module's own code failed: a SyntaxError (its text names the line), a raise
+        frames = traceback.extract_tb(err.__traceback__)
+        at = "" if isinstance(err, SyntaxError) or not frames else f" at {frames[-1].filename}:{frames[-1].lineno}"
+        raise ConfigError(f"{what} class {path}: importing {module} raised {type(err).__name__}: {err}{at}; "
+                          "fix that module") from None
+    found = getattr(found, name, None)
+    if isinstance(found, types.ModuleType) or found is None and _is_module(path):
+        raise ConfigError(f"{what} class {path}: {path} is a module; give <module>.<Class>")
+    if found is None:
+        raise ConfigError(f"{what} class {path} cannot be imported (module {module!r} has no attribute {name!r}); "
+                          "is its module on PYTHONPATH?")
+    return found
+
+
+def _is_module(path: str) -> bool:
+    try:
+        return importlib.util.find_spec(path) is not None
+    except (ImportError, ValueError):  # its parent is no package
+        return False

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Sequence
@@ -92,8 +93,12 @@ class Schedule:
     def checked_rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         """:meth:`rate`, or ScheduleRateError (one line) when it is not a number in [0, 1]."""
         rate = self.rate(k, total_epochs, train_success)
-        if not (isinstance(rate, (int, float, np.floating)) and 0.0 <= rate <= 1.0):  # NaN fails too
-            raise ScheduleRateError(f"schedule {self.label()}: its rate at epoch {k} of {total_epochs} is {rate}, "
+        if isinstance(rate, np.ndarray) and rate.size == 1:  # np.where(...) of a scalar: a 0-d array
+            rate = rate.item()
+        is_number = isinstance(rate, numbers.Real) and not isinstance(rate, bool)  # numpy's scalars too
+        if not (is_number and 0.0 <= rate <= 1.0):  # NaN fails too
+            shown = rate if is_number else f"{rate!r}, a {type(rate).__name__}"
+            raise ScheduleRateError(f"schedule {self.label()}: its rate at epoch {k} of {total_epochs} is {shown}, "
                                     f"not in [0, 1]; fix {kind_name(type(self))}.rate")
         return float(rate)
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from hersd.contract.schedules.base import Schedule, param
+from hersd.contract.schedules.constant import Constant
 
 
 @dataclass
@@ -23,6 +24,10 @@ class Cosine(Schedule):
 
     start: float = param(1.0, 0.0, 1.0, "the rate the cosine starts from (eps(0))")
     end: float = param(0.5, 0.0, 1.0, "the rate at the last epoch K")
+
+    def equivalent(self) -> Schedule:
+        """start = end is the constant rate ``end`` (its runs are that constant's); not for a subclass."""
+        return Constant(eps=self.end) if self.start == self.end and type(self) is Cosine else self
 
     def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         return self.end + (self.start - self.end) * (1.0 + math.cos(math.pi * k / total_epochs)) / 2.0

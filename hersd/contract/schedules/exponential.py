@@ -28,10 +28,11 @@ class Exponential(Schedule):
             self.beta1 = solved_beta1(self.mean_rate, self.beta2, total_epochs)
 
     def equivalent(self) -> Schedule:
-        """beta2 = 0 is the linear kind: its runs are linear runs (the same folder and identity). Not for a
-        subclass, whose rate may be its own: its runs stay its own."""
-        return Linear(beta1=self.beta1, mean_rate=self.mean_rate) if self.beta2 == 0 and type(self) is Exponential \
-            else self
+        """beta2 = 0 is the linear kind, beta1 = 0 (mean_rate unset) the constant rate 1: its runs are theirs (the
+        same folder and identity). Not for a subclass, whose rate may be its own: its runs stay its own."""
+        if type(self) is not Exponential or self.beta2 != 0 and (self.beta1 != 0 or self.mean_rate is not None):
+            return self
+        return Linear(beta1=self.beta1, mean_rate=self.mean_rate).equivalent()
 
     def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         return float(decay_rate(k, total_epochs, self.beta1, self.beta2))

@@ -7,6 +7,7 @@ from typing import Optional, Sequence
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules.base import Schedule, param
+from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.equations import beta1_for_mean_rate, decay_rate, mean_rate_approx, mean_rate_exact
 
 BETA1_DOC = "eq. 9: final drop of the rate, in [0, 1]"
@@ -38,6 +39,11 @@ class Linear(Schedule):
     def resolve(self, total_epochs: int) -> None:
         if self.mean_rate is not None:
             self.beta1 = solved_beta1(self.mean_rate, 0.0, total_epochs)
+
+    def equivalent(self) -> Schedule:
+        """beta1 = 0 is the constant rate 1 (its runs are constant-1's); not for a subclass, or a beta1 still to
+        be solved from mean_rate."""
+        return Constant(eps=1.0) if self.beta1 == 0 and self.mean_rate is None and type(self) is Linear else self
 
     def rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         return float(decay_rate(k, total_epochs, self.beta1, 0.0))
