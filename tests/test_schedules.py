@@ -111,6 +111,24 @@ def test_train_help_states_every_schedules_formula_and_settings(capsys):
     assert "schedule.window=10" in formulas and "schedule.from_run=null" in formulas
 
 
+def test_train_help_lists_a_preset_of_ones_own_and_its_class_settings(tmp_path, monkeypatch, capsys):
+    """``schedule=step hydra.searchpath=[file://<folder>]``, the route docs/ARCHITECTURE.md gives for one's own
+    kind beside the paper's in a sweep: --help listed neither the preset nor its class's settings."""
+    from hersd.engine.cli import main
+
+    (tmp_path / "conf" / "schedule").mkdir(parents=True)
+    (tmp_path / "conf" / "schedule" / "mystep.yaml").write_text("_target_: help_steps.HelpStep\nhigh: 0.9\n")
+    (tmp_path / "help_steps.py").write_text(
+        "from dataclasses import dataclass\nfrom hersd.contract.schedules import Schedule, param\n\n\n@dataclass\n"
+        "class HelpStep(Schedule):\n    high: float = param(0.9, 0.0, 1.0, 'the rate before epoch 3')\n\n"
+        "    def rate(self, k, total_epochs, train_success=()):\n        return self.high if k < 3 else 0.5\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    main(["schedule=mystep", f"hydra.searchpath=[file://{tmp_path / 'conf'}]", "--help"])
+    out = capsys.readouterr().out
+    assert "|mystep|" in next(line for line in out.splitlines() if line.startswith("  schedule="))
+    assert "help_steps.HelpStep:" in out and "schedule.high=0.9" in out and "the rate before epoch 3" in out
+
+
 def test_cosine_runs_from_start_to_end_and_its_exact_mean_rate_is_its_formulas():
     schedule = ScheduleConfig(kind="cosine", start=0.9, end=0.3)
     for total in (1, 2, 7, 200):

@@ -19,10 +19,11 @@ from typing import Any
 from hersd.contract.compose import compose_train, explain_config_error, group_choices
 from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig, learner_key, learner_settings_class
 from hersd.contract.errors import ConfigError
-from hersd.contract.schedules import TARGET_KEY, known_kinds, schedule_class
+from hersd.contract.schedules import TARGET_KEY, kind_name, known_kinds, schedule_class
 from hersd.contract.runstore import RunLockedError, check_writable, run_dir
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
+HELP_FLAGS = ("-h", "--help")
 _FIELD_LINE = re.compile(r"^\s+(\w+):[^=]+=.*?(?:#\s*(.*))?$")
 
 
@@ -91,9 +92,33 @@ def schedule_lines(chosen: list[str] = ()) -> list[str]:
 
 
 def chosen_schedules(argv: list[str]) -> list[str]:
-    """The schedule classes a command line names by ``schedule._target_=`` or ``schedule.kind=``."""
+    """The schedule classes a command line names by ``schedule._target_=`` or ``schedule.kind=``, or by a preset
+    of one's own (``schedule=step`` in a ``hydra.searchpath`` folder): the class the composed config holds."""
     keys = (f"schedule.{TARGET_KEY}", "schedule.kind")
-    return [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
+    named = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
+    presets = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0] == "schedule"]
+    if any(preset not in group_choices("schedule") for preset in presets):
+        from hydra.errors import HydraException
+        from omegaconf.errors import OmegaConfBaseException
+
+        try:
+            named.append(kind_name(type(compose_train([arg for arg in argv if arg not in HELP_FLAGS]).schedule)))
+        except (HydraException, OmegaConfBaseException) as err:
+            raise ConfigError(explain_config_error(err)) from None
+    return named
+
+
+def searched_folders(argv: list[str]) -> list[Path]:
+    """The config folders of ``hydra.searchpath=[file://<folder>, ...]`` on the command line."""
+    paths = [arg.split("=", 1)[1].strip("[]").split(",") for arg in argv if arg.startswith("hydra.searchpath=")]
+    return [Path(path.strip().removeprefix("file://")) for group in paths for path in group
+            if path.strip().startswith("file://")]
+
+
+def choices(group: str, argv: list[str]) -> list[str]:
+    """A group's choices: the package's (:func:`group_choices`), and the configs of the searched folders."""
+    own = [path.stem for folder in searched_folders(argv) for path in (folder / group).glob("*.yaml")]
+    return sorted({*group_choices(group), *own})
 
 
 def learner_lines(argv: list[str]) -> list[str]:
@@ -115,7 +140,7 @@ def usage(argv: list[str] = ()) -> str:
     """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
     with the package's kinds, and a learner it names beyond the package's with its settings (ConfigError if
     either cannot be found)."""
-    groups = [f"  {group}={'|'.join(group_choices(group))}" for group in GROUPS]
+    groups = [f"  {group}={'|'.join(choices(group, argv))}" for group in GROUPS]
     return "\n".join([
         "usage: hersd-train [KEY=VALUE ...]", "",
         "Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same",
@@ -143,7 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     from omegaconf.errors import OmegaConfBaseException
 
     argv = sys.argv[1:] if argv is None else argv
-    if any(arg in ("-h", "--help") for arg in argv):
+    if any(arg in HELP_FLAGS for arg in argv):
         try:
             print(usage(argv))
         except ConfigError as err:
