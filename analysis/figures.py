@@ -25,7 +25,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
-from analysis.load import HER_EPS, HER_WEIGHTS, PAPER_EPOCHS  # noqa: E402
+from analysis.load import HER_EPS, HER_WEIGHTS, PAPER_EPOCHS, is_archer  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
 from hersd.contract.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
 from hersd.contract.tasks import task_rank, task_title  # noqa: E402
@@ -135,7 +135,7 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
     used: dict[tuple, int] = {}
     for config, row in configs.iterrows():
         colour = colours[row["schedule_tag"]]
-        if row["constant_rate"] and row["algo"].removesuffix("_mep") == "archer":
+        if row["constant_rate"] and is_archer(row["algo"]):
             colour = "0.55"
         linestyle = "--" if row["mep"] else schedule_class(row["schedule"]).line
         repeats = used.get((colour, linestyle), 0)

@@ -32,7 +32,7 @@ import yaml
 
 from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
-from hersd.contract.config import AlgoConfig, TrainConfig
+from hersd.contract.config import PAPER_LEARNER, AlgoConfig, TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
 from hersd.contract.runstore import HASHED_UNLESS, run_identity
@@ -81,6 +81,11 @@ def preset_weights(algo: str) -> tuple[float, float]:
 HER_EPS = Constant().eps
 HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
 ARCHER_WEIGHTS = preset_weights("archer")
+
+
+def is_archer(algo: str) -> bool:
+    """Whether a run's logged ``algo`` name (config.algo.name) is ARCHER's, with or without MEP."""
+    return algo.removesuffix("_mep") == "archer"
 PAPER_EPOCHS = TrainConfig().epochs  # K of the paper's runs (the default): the one K a label leaves unsaid
 PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
 READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
@@ -100,6 +105,11 @@ class RunTable:
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
     missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
     copies: list[str] = field(default_factory=list)  # one line per second log of a run already read, left out
+    left_out: int = 0  # logs found and not read: unreadable, of a schedule class not importable here, or copies
+
+    def warnings(self) -> list[str]:
+        """One line per log left out: unreadable, of a schedule class not importable here, or a copy."""
+        return [*(f"skipped unreadable log {line}" for line in self.skipped), *self.missing_schedules, *self.copies]
 
 
 class MissingSchedule(NamedTuple):
@@ -124,7 +134,7 @@ def defaults_id(settings: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(defaults, sort_keys=True, default=str).encode()).hexdigest()[:8]
 
 
-def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = "ddpg",
+def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = PAPER_LEARNER,
                  epochs: int = PAPER_EPOCHS, variants: Sequence[str] = (), algo: str = "her") -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
@@ -138,7 +148,7 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
     """
     if schedule.constant_rate:
         eps = schedule.rate(1, 1)
-        archer = algo.removesuffix("_mep") == "archer"
+        archer = is_archer(algo)
         name = "ARCHER" if archer else "HER"
         qualifiers = [f"eps={eps:g}"] if eps != HER_EPS else []
         if archer and (lambda_r, lambda_h) == ARCHER_WEIGHTS:
@@ -152,7 +162,7 @@ def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool
     qualifiers += variants
     if epochs != PAPER_EPOCHS:
         qualifiers.append(f"K={epochs}")
-    prefix = [] if learner == "ddpg" else [learner_label(learner)]
+    prefix = [] if learner == PAPER_LEARNER else [learner_label(learner)]
     return " ".join(prefix + [name + ("-MEP" if mep else "")] + qualifiers)
 
 
@@ -167,7 +177,7 @@ def _config_order(run: dict[str, Any]) -> tuple:
     the other kinds (hersd.contract.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
     K (the paper's first)."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
-    return (run["learner"] != "ddpg", run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
+    return (run["learner"] != PAPER_LEARNER, run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
             run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"],
             run["total_epochs"] != PAPER_EPOCHS, run["total_epochs"])
 
@@ -229,7 +239,7 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     row = {
         "task": config["task"]["name"],
         "algo": config["algo"]["name"],
-        "learner": str(config.get("learner", {}).get("name", "ddpg")),
+        "learner": str(config.get("learner", {}).get("name", PAPER_LEARNER)),
         "schedule": kind_name(type(schedule)),
         "schedule_tag": schedule.tag(),
         "schedule_label": schedule.label(),
@@ -314,7 +324,7 @@ class LogReading:
             raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
                                    f"algos present: {', '.join(found_algos)})")
         table = _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
-        table.missing_schedules, table.copies = missing, copies
+        table.missing_schedules, table.copies, table.left_out = missing, copies, len(logs) - len(readable)
         return table
 
 
@@ -335,10 +345,16 @@ def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:
     paths: dict[str, list[str]] = {}
     for log in missing:
         paths.setdefault(log.error, []).append(log.path)
-    return [f"{error.removesuffix('; is its module on PYTHONPATH?')}: {len(shown)} run log"
-            f"{'' if len(shown) == 1 else 's'} skipped ({shown[0]}{' and others' if len(shown) > 1 else ''}); "
-            "put the folder holding the class's module on PYTHONPATH (PYTHONPATH=<folder> hersd-report ...) to "
-            "read them" for error, shown in paths.items()]
+    fixes = {"; is its module on PYTHONPATH?": "put the folder holding the class's module on PYTHONPATH "
+                                               "(PYTHONPATH=<folder> hersd-report ...) to read them",
+             "; fix that module": "fix that module to read them"}  # hersd.contract.plugins.class_at's two endings
+    lines = []
+    for error, shown in paths.items():
+        ending = next((end for end in fixes if error.endswith(end)), None)
+        lines.append(f"{error.removesuffix(ending or '')}: {len(shown)} run log{'' if len(shown) == 1 else 's'} "
+                     f"skipped ({shown[0]}{' and others' if len(shown) > 1 else ''})"
+                     + (f"; {fixes[ending]}" if ending else ""))
+    return lines
 
 
 def start_reading(folder: str | Path) -> LogReading:

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.load import HER_EPS, HER_WEIGHTS
+from hersd.contract.config import PAPER_LEARNER
 from hersd.contract.schedules import schedule_from_record, schedule_rank
 from hersd.contract.tasks import task_rank
 
@@ -535,7 +536,7 @@ def composition_versus_paper(shares: pd.DataFrame, runs: pd.DataFrame, task: str
     """
     her = runs[(runs["task"] == task) & runs["constant_rate"] & (runs["eps"] == HER_EPS)
                & (runs["lambda_r"] == HER_WEIGHTS[0]) & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"]
-               & (runs["learner"] == "ddpg")]
+               & (runs["learner"] == PAPER_LEARNER)]
     ours = shares[(shares["task"] == task) & (shares["epoch"] == epoch) & shares["config"].isin(her["config"])]
     columns = ["source", "config", "seeds", "epoch", *PAPER_COMPOSITION]
     if ours.empty:

@@ -500,7 +500,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     for line in table.warnings():
         warn(f"warning: {line}")
     runs = table.runs
-    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {len(table.skipped)} "
+    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {table.left_out} "
         f"skipped), {_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
         f"{_count(runs['config'].nunique(), 'configuration')} in {timings['load']:.1f} s")
     studies = _read_studies(given, folder)

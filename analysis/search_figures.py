@@ -46,8 +46,9 @@ from analysis.tables import markdown_table  # noqa: E402
 from hersd.contract.errors import ConfigError  # noqa: E402
 from hersd.contract.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
-from hersd.contract.study import (KIND_ATTR, PARAM_NAMES, RETRY_OF_ATTR, RUN_DIRS_ATTR, StudySettings,  # noqa: E402
-                         StudyStorageError, kind_params, mean_rates, schedule_config, trial_params)
+from hersd.contract.study import (KIND_ATTR, PAPER_SETTINGS, PARAM_NAMES, REWARD_PARAM, RETRY_OF_ATTR,  # noqa: E402
+                                  RUN_DIRS_ATTR, StudySettings, StudyStorageError, kind_params, mean_rates,
+                                  schedule_config, trial_params)
 
 ISO_LEVELS = (0.5, 0.6, 0.7, *MU_EPS_BAND, 0.95)  # mu_eps iso-lines drawn; the band's bounds thicker
 DEFAULT_BETA2_RANGE = (-2.0, 2.0)
@@ -114,7 +115,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
                "beta1": params.get("beta1"),
                "beta2": getattr(schedule_config(params), "beta2", None) if decays else None,
-               "eps": params.get("eps"), "lambda_h": params.get("lambda_h"),
+               "eps": params.get("eps"), REWARD_PARAM: params.get(REWARD_PARAM),
                **{name: params.get(name) for name in others}, "last_step": trial.last_step,
                "retry_of": trial.user_attrs.get(RETRY_OF_ATTR),
                "duration_s": trial.duration.total_seconds() if trial.duration is not None else None,
@@ -127,7 +128,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
     at = COLUMNS.index(PARAM_NAMES[-1]) + 1
     types = {name: "Int64" if name in ranges and ranges[name].integer else "float64" for name in others}
     return pd.DataFrame.from_records(rows, columns=[*COLUMNS[:at], *others, *COLUMNS[at:]]).astype(
-        {**{name: "float64" for name in ("value", "beta1", "beta2", "eps", "lambda_h", "mu_eps", "mu_eps_approx",
+        {**{name: "float64" for name in ("value", *PAPER_SETTINGS, REWARD_PARAM, "mu_eps", "mu_eps_approx",
                                          "duration_s")}, **types})
 
 
@@ -339,10 +340,13 @@ class StudySummary:
         return plot_settings(self.trials, self.panels, self.ranges, self.beta2_range, title, self.value_label)
 
     def best_markdown(self) -> str:
-        """The best trials as a Markdown document (run directories left out: too wide)."""
-        searched = f"searched settings: {', '.join(self.settings)}; " if self.settings else ""
-        return (f"# Best trials of study `{self.name}`\n\n{self.value_label}; {searched}mu_eps exact over the "
-                f"study's epochs (eq. 10) and by eq. 11.\n\n"
+        """The best trials as a Markdown document (run directories left out: too wide); its header names the
+        mean rates its table has."""
+        rates = [text for column, text in (("mu_eps", "exact over the study's epochs (eq. 10)"),
+                                           ("mu_eps_approx", "by eq. 11")) if column in self.best]
+        header = [self.value_label, *([f"searched settings: {', '.join(self.settings)}"] if self.settings else []),
+                  *([f"mu_eps {' and '.join(rates)}"] if rates else [])]
+        return (f"# Best trials of study `{self.name}`\n\n{'; '.join(header)}.\n\n"
                 + markdown_table(self.best.drop(columns=["run_dirs"], errors="ignore"), float_format="{:.4g}")
                 + ("" if len(self.best) else "\n(no complete trials yet)\n"))
 
@@ -352,7 +356,8 @@ def read_study(storage: optuna.storages.BaseStorage, name: str, top: int = 10) -
     study = optuna.load_study(study_name=name, storage=storage)
     frame = trials_frame(study)
     settings = StudySettings.of(study.user_attrs)
-    value_label = settings.value_label() if settings else "objective"
+    value_label = "objective" if settings is None else \
+        f"{settings.objective} of {settings.metric}, mean of {settings.seeds} seed(s)"  # what a trial's value is
     trials = study.get_trials(deepcopy=False)
     return StudySummary(name=name, trials=frame, best=best_trials(frame, top), value_label=value_label,
                         beta2_range=_beta2_range(study, frame), settings=searched_settings(trials),

@@ -313,3 +313,16 @@ def test_a_learner_setting_of_another_declared_type_is_left_to_its_class():
     assert _typed("learner.x.mode", Union[int, str], "abc") == "abc"
     with pytest.raises(ConfigError, match=r"^learner\.x\.scale must be a number, got 1000"):
         _typed("learner.x.scale", float, 10 ** 400)  # too large for a float: one line, not OverflowError
+
+
+def test_the_papers_learner_has_one_name_the_default_every_reader_asks():
+    """PAPER_LEARNER (hersd.contract.config) is the schema's default learner and DDPG's NAME; a config without a
+    learner is its, and its runs keep the folder of runs made before learners were a setting."""
+    from hersd.contract.config import PACKAGE_LEARNERS, PAPER_LEARNER, LearnerConfig
+    from hersd.contract.runstore import run_dir, run_identity
+    from hersd.engine.learners.ddpg import DDPG
+
+    assert PAPER_LEARNER == DDPG.NAME == LearnerConfig().name == compose_train([]).learner.name
+    assert PACKAGE_LEARNERS[PAPER_LEARNER] is None
+    assert "learner" not in run_identity(compose_train([]))
+    assert run_dir(compose_train(["task=reach"])).parent.parent.name == "her"

@@ -1,6 +1,7 @@
 """A run's identity covers exactly the settings its learner trains with: for every learner, the package's and a
 subclass of TD3 that inherits ``TD3.build`` under a name of its own (issue 51's pitfall), changing any learner
-setting, its own or another learner's, changes the run's hash exactly when it changes what the learner trains."""
+setting, its own or another learner's, changes the run's hash exactly when it changes what the learner trains (the
+subclass refuses its parent's key, learner.td3.*, which it does not read)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from helpers import GOAL, OBS, batch, tiny_spec
 
 from hersd.contract.compose import compose_train
 from hersd.contract.config import SACConfig, TD3Config
+from hersd.contract.errors import ConfigError
 from hersd.engine.learners import LEARNERS, learner_class
 from hersd.engine.learners.td3 import TD3
 from hersd.contract.runstore import config_hash
@@ -61,6 +63,10 @@ def test_a_learner_setting_changes_the_runs_hash_exactly_when_it_changes_what_th
     selected = [f"learner.name={name}"]
     base_hash, base_parameters = trained(selected)
     for override in setting_changes(sections):
+        if name == "td3late" and override.startswith("learner.td3."):  # its parent's key: refused, not ignored
+            with pytest.raises(ConfigError, match=r"^learner td3late reads learner\.td3late\.\*, not learner\.td3\.\*"):
+                trained([*selected, override])
+            continue
         new_hash, parameters = trained([*selected, override])
         same_training = all(torch.equal(a, b) for a, b in zip(base_parameters, parameters))
         what = "what it trains but not the run's hash" if new_hash == base_hash else "the run's hash but not what it trains"

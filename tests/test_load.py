@@ -205,7 +205,7 @@ def test_copies_of_one_run_count_once_the_complete_or_longest_read(tmp_path, cap
     write_run(tmp_path / "d_other_seed", make_config(epochs=6, seed=1), np.linspace(0, 1, 6))
     table = load_runs(tmp_path)
     assert sorted(table.runs["path"]) == ["b_run/run.mcap", "d_other_seed/run.mcap"]
-    assert len(table.epochs) == 12 and not table.skipped
+    assert len(table.epochs) == 12 and not table.skipped and table.left_out == 2
     assert [line.split(":")[0] for line in table.copies] == ["a_partial/run.mcap", "c_backup/run.mcap"]
     assert all("(b_run/run.mcap, the one read), left out" in line for line in table.copies)
     assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
@@ -224,12 +224,28 @@ def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp
         write_run(tmp_path / f"step{seed}", make_config(seed=seed), np.zeros(6),
                   meta={"config": {**record, "seed": seed}})
     table = load_runs(tmp_path)
-    assert len(table.runs) == 1 and not table.skipped and len(table.missing_schedules) == 1
+    assert len(table.runs) == 1 and not table.skipped and len(table.missing_schedules) == 1 and table.left_out == 2
     assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line.startswith("warning: schedule class users_own_steps.Step cannot be imported")
     assert "2 run logs skipped (step0/run.mcap and others)" in line and "on PYTHONPATH" in line
     assert "lacks or mistypes" not in line
+
+
+def test_a_schedule_module_that_fails_to_import_is_one_warning_saying_to_fix_it(tmp_path, monkeypatch, capsys):
+    """A SyntaxError in the class's module was a traceback that stopped the report."""
+    write_run(tmp_path / "her", make_config(), np.zeros(6))
+    record = config_record(make_config())
+    record["schedule"] = {"kind": "broken_steps_load.Step", "k0": 3}
+    write_run(tmp_path / "step", make_config(seed=1), np.zeros(6), meta={"config": {**record, "seed": 1}})
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "broken_steps_load.py").write_text("class Step(\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("warning: schedule class broken_steps_load.Step: importing broken_steps_load raised "
+                           "SyntaxError")
+    assert line.endswith("1 run log skipped (step/run.mcap); fix that module to read them")
 
 
 def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_path):

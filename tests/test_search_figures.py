@@ -15,7 +15,7 @@ from user_schedules import MODULE, write_module
 from analysis.figures import SMALLEST_FONT
 from analysis.report import DPI, build_report
 from analysis.synthetic import write_run
-from hersd.contract.study import KIND_ATTR
+from hersd.contract.study import KIND_ATTR, SETTINGS_ATTR, StudySettings
 
 
 def test_the_search_figures_command_reports_a_bad_storage_in_one_line(storages, tmp_path, capsys):
@@ -87,6 +87,10 @@ def test_a_search_of_an_outside_schedule_is_drawn_against_each_setting_and_table
 
     summary = read_study(open_study_storage(tmp_path / "search" / "kstep.db").storage, "kstep")
     assert str(summary.trials["k0"].dtype) == "Int64"  # drawn as whole numbers, tabled as them
+    assert summary.value_label == "objective"  # a study without stored settings
+    study.set_user_attr(SETTINGS_ATTR, vars(StudySettings("auc", "test_success", 3, 0, 50, "reach", "her", "ab")))
+    assert read_study(open_study_storage(tmp_path / "search" / "kstep.db").storage, "kstep").value_label == \
+        "auc of test_success, mean of 3 seed(s)"
     axes = [ax for ax in summary.figure().axes if ax.get_visible()]
     assert [ax.get_xlabel() for ax in axes] == ["low", "k0"]  # a panel per searched setting, no plane
     low, k0 = axes
@@ -125,3 +129,20 @@ def test_a_search_of_decays_and_other_settings_draws_the_plane_above_a_panel_for
     assert (decays.panels, decays.figure_name) == ([], "beta_plane")
     assert decays.figure_title == "trials in the (β1, β2) plane"
     assert list(decays.best.columns[:6]) == ["rank", "trial", "value", "kind", "beta1", "beta2"]
+
+
+@pytest.mark.parametrize("rates, says", [
+    ((), "objective; searched settings: k0."),
+    (("mu_eps",), "objective; searched settings: k0; mu_eps exact over the study's epochs (eq. 10)."),
+    (("mu_eps_approx",), "objective; searched settings: k0; mu_eps by eq. 11."),
+    (("mu_eps", "mu_eps_approx"), "objective; searched settings: k0; mu_eps exact over the study's epochs (eq. 10) "
+                                  "and by eq. 11."),
+])
+def test_the_best_trials_header_names_only_the_mean_rates_its_table_has(rates, says):
+    from analysis.search_figures import StudySummary
+
+    best = pd.DataFrame({"rank": [1], "trial": [0], "value": [0.5], "kind": ["my_pkg.Step"], "k0": [3],
+                         **{name: [0.8] for name in rates}})
+    summary = StudySummary(name="s", trials=best, best=best, value_label="objective", beta2_range=(-2.0, 2.0),
+                           settings=["k0"])
+    assert summary.best_markdown().split("\n")[2] == says

@@ -44,5 +44,4 @@ def test_stored_parameters_give_back_the_trials(params: dict, kinds: list[str]) 
 def test_settings_are_read_back_or_none() -> None:
     settings = StudySettings("auc", "test_success", 3, 0, 50, "push", "her", "0123abcd")
     assert StudySettings.of({"settings": vars(settings)}) == settings
-    assert settings.value_label() == "auc of test_success, mean of 3 seed(s)"
     assert StudySettings.of({}) is None and StudySettings.of({"settings": {"objective": "auc"}}) is None

@@ -183,3 +183,68 @@ def test_a_class_chosen_by_its_path_that_declares_a_name_nothing_finds_is_refuse
     assert learner_class("hersd.engine.learners.td3.TD3").NAME == "td3"  # the package's, found by its name
     declare_entry_point(user_late)
     assert learner_class("user_late.RegisteredLate").__name__ == "RegisteredLate"
+
+
+# A TD3 subclass whose settings do not extend TD3's: TD3's code (target_action) reads policy_noise from them.
+LATE_ONLY = '''
+
+@dataclass
+class LateOnly:
+    actor_start: int = 4
+
+
+class TD3LateOnly(TD3):
+    SETTINGS = LateOnly
+'''
+
+
+def test_a_td3_subclass_reads_its_own_key_only_and_its_range_errors_name_it(user_late):
+    """learner.td3.* beside a TD3 subclass would be checked and left out (it trains at its own key's values): it is
+    refused in one line; TD3's range checks name the subclass's key. A sweep's other learners' sections still pass."""
+    from hersd.contract.config import TrainConfig
+
+    with pytest.raises(ConfigError, match=r"^learner user_late\.TD3Late reads learner\.td3late\.\*, not "
+                                          r"learner\.td3\.\*"):
+        TrainConfig(learner={"_target_": "user_late.TD3Late", "td3": {"policy_delay": 5}})
+    with pytest.raises(ConfigError, match=r"^learner\.td3late\.policy_delay must be >= 1, got 0$"):
+        TrainConfig(learner={"_target_": "user_late.TD3Late", "td3late": {"policy_delay": 0}})
+    with pytest.raises(ConfigError, match=r"^learner\.td3late\.noise_clip must be a number in \[0, "):
+        TrainConfig(learner={"_target_": "user_late.TD3Late", "td3late": {"noise_clip": -1.0}})
+    with pytest.raises(ConfigError, match=r"^learner\.td3\.policy_delay must be >= 1, got 0$"):
+        TrainConfig(learner={"name": "td3", "td3": {"policy_delay": 0}})
+    for name in ("ddpg", "sac", "td3"):  # a sweep over learner.name=ddpg,sac,td3 carries every section
+        learner = TrainConfig(learner={"name": name, "td3": {"policy_delay": 5}, "sac": {"init_alpha": 0.5}}).learner
+        assert learner.name == name and (name != "td3" or learner.settings.policy_delay == 5)
+    sweep = ["task=reach", "seeds=1", "learner.name=ddpg,td3", "learner.td3.policy_delay=5", "--dry-run"]
+    swept = command("sweeps.launch:main", [*sweep, f"results_dir={user_late / 'results'}"], user_late)
+    assert [line.split()[1].split("/")[-3] for line in swept.stdout.splitlines() if line.startswith("  new ")] == [
+        "her", "td3-her"]
+
+
+def test_a_subclass_whose_settings_do_not_extend_its_parents_is_refused_before_any_run(user_late, capsys):
+    """TD3LateOnly's SETTINGS lacks TD3's: it used to pass every check and stop mid-run (AttributeError in td3.py),
+    leaving a run folder."""
+    from hersd.contract.config import TrainConfig
+    from hersd.engine.cli import main as train_main
+
+    (user_late / "user_late.py").write_text(LATE + LATE_ONLY)
+    with pytest.raises(ConfigError, match=r"^learner user_late\.TD3LateOnly extends TD3, whose code reads TD3Config: "
+                                          r"its SETTINGS \(LateOnly\) must be TD3Config or a subclass of it"):
+        TrainConfig(learner={"_target_": "user_late.TD3LateOnly"})
+    results = user_late / "results"
+    with pytest.raises(SystemExit) as ended:
+        train_main([*TINY, "epochs=1", f"results_dir={results}", "learner._target_=user_late.TD3LateOnly"])
+    err = capsys.readouterr().err
+    assert ended.value.code == 2 and err.count("\n") == 1 and "must be TD3Config or a subclass" in err
+    assert not results.exists()
+
+
+def test_settings_of_your_own_learner_beside_ddpg_say_ddpg_has_none_and_what_to_do(user_late):
+    """``learner.name=ddpg,user_late.TD3Late learner.td3late.actor_start=2``: the ddpg run has no settings (it used to
+    say "its settings: learner.ddpg.*"); the line names the learner config of your own that sweeps them."""
+    from hersd.contract.config import TrainConfig
+
+    with pytest.raises(ConfigError, match=r"^learner ddpg has no settings, so learner\.td3late\.\* sets nothing; .*"
+                                          r"<folder>/learner/<choice>\.yaml holding _target_: <module>\.<Class> and "
+                                          r"td3late: .*hydra\.searchpath=\[file:///<folder>\] learner=ddpg,<choice>"):
+        TrainConfig(learner={"name": "ddpg", "td3late": {"actor_start": 2}})

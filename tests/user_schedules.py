@@ -83,3 +83,65 @@ def argv(module_main: str, args: list[str]) -> list[str]:
 
 def environment(module_dir: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(module_dir), os.environ.get("PYTHONPATH", "")])}
+
+
+# A second module of a newcomer's classes, for the search's ranges (tests/test_search_config.py): OwnEps and HalfDrop
+# declare settings the package's kinds declare too (eps, beta1), over their own ranges; HerLike inherits constant's
+# eps; ShortStep declares KStep's k0 over another range, WholeLow KStep's low as a whole number.
+SHARED_MODULE = "newcomer_shared"
+SHARED_SOURCE = '''
+from dataclasses import dataclass
+
+from hersd.contract.schedules import Constant, Schedule, param
+
+
+@dataclass
+class OwnEps(Schedule):
+    searched = ("eps",)
+
+    eps: float = param(0.8, 0.0, 1.0, "the fixed rate")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.eps
+
+
+@dataclass
+class HalfDrop(Schedule):
+    searched = ("beta1",)
+
+    beta1: float = param(0.25, 0.0, 0.5, "the drop over the run, at most half")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return 1.0 - self.beta1 * k / total_epochs
+
+
+@dataclass
+class HerLike(Constant):
+    pass
+
+
+@dataclass
+class ShortStep(Schedule):
+    searched = ("k0",)
+
+    k0: int = param(5, 1, 50, "the last epoch at rate 0.9", integer=True)
+
+    def rate(self, k, total_epochs, train_success=()):
+        return 0.9 if k <= self.k0 else 0.5
+
+
+@dataclass
+class WholeLow(Schedule):
+    searched = ("low",)
+
+    low: int = param(1, 0, 1, "the rate, 0 or 1", integer=True)
+
+    def rate(self, k, total_epochs, train_success=()):
+        return float(self.low)
+'''
+
+
+def write_shared_module(folder: Path) -> Path:
+    """The module ``newcomer_shared`` written into ``folder`` -> ``folder``."""
+    (folder / f"{SHARED_MODULE}.py").write_text(SHARED_SOURCE)
+    return folder

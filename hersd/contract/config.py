@@ -15,6 +15,7 @@ import dataclasses
 import math
 import sys
 import typing
+from contextvars import ContextVar
 from dataclasses import asdict, dataclass, field
 from typing import Any, List, Optional
 
@@ -29,7 +30,7 @@ GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("fp32", "bf16")
 UPDATES = ("autograd", "fast")
-FAST_UPDATE_LEARNERS = ("ddpg", "td3")  # the learners with a hand-written update (hersd/engine/learners/fast.py)
+FAST_UPDATE_LEARNERS = ("ddpg", "td3")  # the NAMEs of fast.py's FAST_CLASSES (tests/test_fast_update.py checks)
 
 # Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
 # The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
@@ -184,6 +185,16 @@ class DDPGConfig:
                    f"or null, got {self.gamma}")
 
 
+# The key of the learner whose settings learner_settings is building: a subclass's settings are checked by its
+# parent's __post_init__, whose messages then name the subclass's key (learner.td3late.*), not the parent's.
+_SETTINGS_KEY: ContextVar[Optional[str]] = ContextVar("learner_settings_key", default=None)
+
+
+def setting_name(key: str, name: str) -> str:
+    """``learner.<key>.<name>``, under the key of the learner whose settings are being built, if any, else ``key``."""
+    return f"learner.{_SETTINGS_KEY.get() or key}.{name}"
+
+
 @dataclass
 class TD3Config:
     # TD3 (Fujimoto et al. 2018): twin critics (the target takes their minimum), target policy smoothing.
@@ -193,8 +204,8 @@ class TD3Config:
 
     def __post_init__(self) -> None:
         for name in ("policy_noise", "noise_clip"):
-            _check_number(f"learner.td3.{name}", getattr(self, name), 0.0, SCALE_LIMIT)
-        _check(self.policy_delay >= 1, f"learner.td3.policy_delay must be >= 1, got {self.policy_delay}")
+            _check_number(setting_name("td3", name), getattr(self, name), 0.0, SCALE_LIMIT)
+        _check(self.policy_delay >= 1, f"{setting_name('td3', 'policy_delay')} must be >= 1, got {self.policy_delay}")
 
 
 @dataclass
@@ -205,16 +216,17 @@ class SACConfig:
     target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
 
     def __post_init__(self) -> None:
-        _check_number("learner.sac.init_alpha", self.init_alpha, 1 / SCALE_LIMIT, SCALE_LIMIT)
-        _check_number("learner.sac.alpha_lr", self.alpha_lr, 0.0, LR_LIMIT, low_open=True)
+        _check_number(setting_name("sac", "init_alpha"), self.init_alpha, 1 / SCALE_LIMIT, SCALE_LIMIT)
+        _check_number(setting_name("sac", "alpha_lr"), self.alpha_lr, 0.0, LR_LIMIT, low_open=True)
         if self.target_entropy is not None:
-            _check_number("learner.sac.target_entropy", self.target_entropy, -SCALE_LIMIT, SCALE_LIMIT)
+            _check_number(setting_name("sac", "target_entropy"), self.target_entropy, -SCALE_LIMIT, SCALE_LIMIT)
 
 
 # The package's first learners and their settings classes, as the classes declare them (``SETTINGS``),
 # known here without importing torch (tests/test_learners.py checks they agree). Any other learner (a module
 # of hersd/engine/learners/, an entry point, learner._target_=<module>.<Class>) is imported to ask its class.
-PACKAGE_LEARNERS: dict[str, Optional[type]] = {"ddpg": None, "td3": TD3Config, "sac": SACConfig}
+PAPER_LEARNER = "ddpg"  # the seed paper's learner: the default, and that of every run made before learners existed
+PACKAGE_LEARNERS: dict[str, Optional[type]] = {PAPER_LEARNER: None, "td3": TD3Config, "sac": SACConfig}
 LEARNER_TARGET_KEY = "_target_"
 
 
@@ -232,13 +244,22 @@ def learner_settings_class(name: str) -> tuple[str, Optional[type]]:
     return recorded_name(cls), cls.SETTINGS
 
 
+def parent_keys(name: str) -> set[str]:
+    """The settings keys (``learner.<key>``) of the learner classes the learner ``name``'s class extends: ``td3``
+    for a subclass of TD3; none for the package's learners (whose parents have no settings)."""
+    if name in PACKAGE_LEARNERS:
+        return set()
+    cls = learner_class(name, known=tuple(PACKAGE_LEARNERS))
+    return {learner_key(recorded_name(base)) for base in cls.__mro__[1:] if getattr(base, "SETTINGS", None)}
+
+
 @dataclass
 class LearnerConfig:
     """The off-policy learner and its settings: one object, of the dataclass its class declares (``SETTINGS``),
     the one its ``build`` reads and the run's identity hashes. Every learner also shares ddpg.* (networks,
     optimiser, batch, gamma, polyak once per cycle, normalisation, target clipping) and every other part of a run."""
 
-    name: str = "ddpg"  # ddpg (the paper's) | td3 | sac | an entry point's name | a class (learner._target_=)
+    name: str = PAPER_LEARNER  # ddpg (the paper's) | td3 | sac | an entry point's name | a class (learner._target_=)
     settings: Any = None  # learner.<name>.*: its class's SETTINGS; None: that class's defaults (or it has none)
 
     def __post_init__(self) -> None:
@@ -253,20 +274,35 @@ class LearnerConfig:
 
 def learner_from_config(node: Any) -> LearnerConfig:
     """A config's ``learner`` mapping (``name`` or ``_target_``, its settings under ``learner.<key>``, and other
-    package learners' settings, checked and left out) -> its LearnerConfig; ConfigError (one line) otherwise."""
+    package learners' settings, checked and left out, as a sweep over learners carries them, but not those of a
+    class it extends, which it does not read) -> its LearnerConfig; ConfigError (one line) otherwise."""
     if isinstance(node, LearnerConfig):
         return node
     sections = dict(node)
     target, name = sections.pop(LEARNER_TARGET_KEY, None), sections.pop("name", None)
     _check(not (target and name), f"learner={name} and learner.{LEARNER_TARGET_KEY}={target}: give one of them")
-    name, settings_class = learner_settings_class(target or name or "ddpg")
-    own = sections.pop(learner_key(name), None)
+    name, settings_class = learner_settings_class(target or name or PAPER_LEARNER)
+    own_key = learner_key(name)
+    own = sections.pop(own_key, None)
+    parents = parent_keys(name) if sections else set()
     for key, section in sections.items():
-        _check(PACKAGE_LEARNERS.get(key) is not None,
-               f"learner.{key} is not a setting of learner {name}; its settings: learner.{learner_key(name)}.*")
+        _check(key not in parents, f"learner {name} reads learner.{own_key}.*, not learner.{key}.* (its parent's): "
+               f"set learner.{own_key}.<setting>")
+        _check(PACKAGE_LEARNERS.get(key) is not None, no_setting(name, settings_class, key))
         learner_settings(key, PACKAGE_LEARNERS[key], section)
     _check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
     return LearnerConfig(name, learner_settings(learner_key(name), settings_class, own or {}) if settings_class else None)
+
+
+def no_setting(name: str, settings_class: Optional[type], key: str) -> str:
+    """The line refusing ``learner.<key>.*``, which is no setting of the learner ``name``."""
+    if settings_class is not None:
+        return f"learner.{key} is not a setting of learner {name}; its settings: learner.{learner_key(name)}.*"
+    return (f"learner {name} has no settings, so learner.{key}.* sets nothing; to sweep a learner of your own with "
+            f"its settings beside {name}, put them in a learner config of your own (<folder>/learner/<choice>.yaml "
+            f"holding _target_: <module>.<Class> and {key}: {{<setting>: <value>}}; "
+            f"hydra.searchpath=[file:///<folder>] learner={name if '.' not in name else '<its choice>'},<choice>; "
+            "docs/LEARNERS.md \"Add a learner\")")
 
 
 def learner_settings(key: str, settings_class: type, section: Any) -> Any:
@@ -280,8 +316,12 @@ def learner_settings(key: str, settings_class: type, section: Any) -> Any:
         types = typing.get_type_hints(settings_class)
     except (NameError, TypeError):  # annotations that do not resolve here: the class's own checks only
         types = {}
-    return settings_class(**{name: _typed(f"learner.{key}.{name}", types.get(name), value)
-                             for name, value in section.items()})
+    token = _SETTINGS_KEY.set(key)  # the class's own range checks name this key (setting_name)
+    try:
+        return settings_class(**{name: _typed(f"learner.{key}.{name}", types.get(name), value)
+                                 for name, value in section.items()})
+    finally:
+        _SETTINGS_KEY.reset(token)
 
 
 def _typed(name: str, declared: Any, value: Any) -> Any:
@@ -392,7 +432,8 @@ class TrainConfig:
         self.learner = learner_from_config(self.learner)
         _check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
         _check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
-               f"update=fast: learner {self.learner.name} has no fast update (ddpg and td3 have one); "
+               f"update=fast: learner {self.learner.name} has no fast update "
+               f"({' and '.join(FAST_UPDATE_LEARNERS)} have one); "
                "use update=autograd")
         _check(self.update == "autograd" or self.precision == "fp32",
                "update=fast is a float32 path: use it with precision=fp32")

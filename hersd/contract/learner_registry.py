@@ -44,7 +44,20 @@ def learner_class(name: str, known: tuple[str, ...] = ()) -> Any:
         raise ConfigError(f"learner {name} is not a hersd.engine.learners.GoalConditionedLearner subclass")
     if settings is not None and not dataclasses.is_dataclass(settings):
         raise ConfigError(f"learner {name}: its SETTINGS must be a dataclass (or None), got {settings!r}")
+    _check_inherited_settings(name, cls)
     return cls
+
+
+def _check_inherited_settings(name: str, cls: type) -> None:
+    """ConfigError (one line) unless ``cls``'s SETTINGS extend those of every learner class it extends: their
+    code (``build``, the update) reads them from the one settings object the run holds."""
+    own = cls.SETTINGS
+    for base in cls.__mro__[1:]:
+        parent = vars(base).get("SETTINGS")
+        if parent is not None and not (isinstance(own, type) and issubclass(own, parent)):
+            raise ConfigError(f"learner {name} extends {base.__name__}, whose code reads {parent.__name__}: its "
+                              f"SETTINGS ({getattr(own, '__name__', own)}) must be {parent.__name__} or a subclass "
+                              f"of it (@dataclass class MySettings({parent.__name__}): ...)")
 
 
 def _found_by_name(name: str, cls: type) -> bool:
@@ -66,7 +79,7 @@ def _registered(name: str) -> Any:
 
 def entry_point_names() -> list[str]:
     """The names other packages' learners are declared under (entry points of :data:`ENTRY_POINT_GROUP`), sorted:
-    each a ``learner=<name>`` choice beside conf/learner/'s (:func:`hersd.compose.register_train_schema`)."""
+    each a ``learner=<name>`` choice beside conf/learner/'s (:func:`hersd.contract.compose.register_train_schema`)."""
     return declared_names(ENTRY_POINT_GROUP)
 
 

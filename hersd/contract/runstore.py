@@ -30,9 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
-from hersd.contract.config import TrainConfig, config_record, learner_key
+from hersd.contract.config import PAPER_LEARNER, TrainConfig, config_record, learner_key
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import LOG_NAME, RunLogError, RunRecords, read_records
+from hersd.contract.schedules.base import FLAT_RECORD
 
 CHECKPOINT_NAME = "checkpoint.pt"
 LOCK_NAME = "run.lock"
@@ -42,8 +43,8 @@ NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_check
               "flush_denormal", "render_every", "bias")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
-HASHED_UNLESS: dict[str, Any] = {"schedule.window": 10, "schedule.eps_min": 0.0, "precision": "fp32",
-                                 "update": "autograd"}
+HASHED_UNLESS: dict[str, Any] = {**{f"schedule.{name}": FLAT_RECORD[name] for name in ("window", "eps_min")},
+                                 "precision": "fp32", "update": "autograd"}
 
 
 class RunLockedError(RuntimeError):
@@ -60,9 +61,9 @@ def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     """
     content = config_record(config) if isinstance(config, TrainConfig) else copy.deepcopy(config)
     content = {key: value for key, value in content.items() if key not in NOT_HASHED}
-    learner = content.pop("learner", {"name": "ddpg"})
+    learner = content.pop("learner", {"name": PAPER_LEARNER})
     name = learner["name"]
-    if name != "ddpg":  # a learner's settings are one object, under its name (hersd.contract.config.learner_record)
+    if name != PAPER_LEARNER:  # its settings are one object, under its name (hersd.contract.config.learner_record)
         content["learner"] = {"name": name, **({name: learner[name]} if name in learner else {})}
     for dotted, earlier_value in HASHED_UNLESS.items():
         *parents, leaf = dotted.split(".")
@@ -83,7 +84,7 @@ def run_dir(cfg: TrainConfig) -> Path:
     """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
     if cfg.run_dir is not None:
         return Path(cfg.run_dir)
-    algo = cfg.algo.name if cfg.learner.name == "ddpg" else f"{learner_key(cfg.learner.name)}-{cfg.algo.name}"
+    algo = cfg.algo.name if cfg.learner.name == PAPER_LEARNER else f"{learner_key(cfg.learner.name)}-{cfg.algo.name}"
     return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{config_hash(cfg)}"
 
 

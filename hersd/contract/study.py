@@ -40,7 +40,8 @@ SCHEMES = "use sqlite:///<file>, postgresql://..., another SQLAlchemy URL, or jo
 MESSAGE_LIMIT = 200  # characters of a database's own error message kept in ours
 
 REWARD_PARAM = "lambda_h"  # the one setting a search may draw outside the schedule: algo.lambda_h
-PARAM_NAMES = ("kind", "beta1", "beta2", "eps", REWARD_PARAM)  # the parameters of the paper's kinds' trials
+PAPER_SETTINGS = ("beta1", "beta2", "eps")  # the paper's kinds' searched settings, each ranged by search.space.<name>
+PARAM_NAMES = ("kind", *PAPER_SETTINGS, REWARD_PARAM)  # the parameters of the paper's kinds' trials
 
 # User attributes hersd-search writes and hersd-report reads. The search's own bookkeeping
 # (trial attributes worker, heartbeat, interrupted, refused, lost, pruned_reason, mu_eps,
@@ -228,7 +229,3 @@ class StudySettings:
             return cls(**user_attrs[SETTINGS_ATTR])
         except (KeyError, TypeError):
             return None
-
-    def value_label(self) -> str:
-        """What a trial's value is, e.g. ``auc of test_success, mean of 3 seed(s)``."""
-        return f"{self.objective} of {self.metric}, mean of {self.seeds} seed(s)"

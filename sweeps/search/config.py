@@ -2,11 +2,12 @@
 ``search/search_schema``, which every ``conf/search/*.yaml`` lists first), its range checks,
 and its composition from ``conf/search/<name>.yaml`` plus ``search.*`` overrides.
 
-Every check raises :class:`hersd.contract.config.ConfigError` with one line naming the field.
+Every check raises :class:`hersd.contract.errors.ConfigError` with one line naming the field.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
@@ -16,8 +17,9 @@ from hersd.contract.compose import compose, explain_config_error, group_options,
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
-from hersd.contract.schedules import Exponential, known_kinds, schedule_class
-from hersd.contract.study import JOURNAL_PREFIX, REWARD_PARAM, kind_params, schedule_config, searchable, stored_params
+from hersd.contract.schedules import SCHEDULES, Exponential, known_kinds, schedule_class
+from hersd.contract.study import (JOURNAL_PREFIX, PAPER_SETTINGS, REWARD_PARAM, kind_params, schedule_config,
+                                  searchable, stored_params)
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")
@@ -44,12 +46,13 @@ class SpaceConfig:
 
     # schedule kinds searched (a categorical if > 1): registered names or class paths (hersd.contract.schedules)
     kinds: list[str] = field(default_factory=lambda: [Exponential.kind])
+    # beta1, beta2 and eps as the package's kinds declare them (a class declaring its own: its declared range)
     beta1: Bounds = field(default_factory=lambda: Bounds(0.0, 1.0))  # eq. 9 final drop, within [0, 1]
     beta2: Bounds = field(default_factory=lambda: Bounds(-2.0, 2.0))  # eq. 9 shape (exponential kind only)
     eps: Bounds = field(default_factory=lambda: Bounds(0.5, 1.0))  # fixed rate (constant kind only)
     lambda_h: Optional[Bounds] = None  # hindsight reward weight (eq. 8); null keeps the algo's
-    # any searched setting's range by name (e.g. cosine's start, a class's k0), over beta1, beta2, eps above;
-    # default: the range the schedule declares. Command line: search.space.ranges.k0={low: 1, high: 50}
+    # any searched setting's range by name (e.g. cosine's start, a class's k0), over beta1, beta2, eps above, for
+    # every kind; default: the range the schedule declares. Command line: search.space.ranges.k0={low: 1, high: 50}
     ranges: Dict[str, Bounds] = field(default_factory=dict)
 
 
@@ -121,14 +124,29 @@ def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
     _check(value in choices, f"{name}={value!r} is unknown; choose one of: {', '.join(choices)}")
 
 
+def declaration(kind: str, name: str) -> dataclasses.Field:
+    """Setting ``name`` as ``kind``'s class declares (or inherits) it."""
+    found = [item for item in schedule_class(kind).params() if item.name == name]
+    _check(bool(found), f"search.space.kinds: {kind} searches {name} but declares no such setting; declare it "
+                        f"with param(...) or leave it out of searched")
+    return found[0]
+
+
+def package_setting(kind: str, name: str) -> bool:
+    """Whether search.space.<name> ranges ``kind``'s setting ``name``: beta1, beta2 or eps as one of the package's
+    kinds declares it (inherited by a subclass too), not a class's own declaration of that name."""
+    item = declaration(kind, name)
+    return name in PAPER_SETTINGS and any(item is own for cls in SCHEDULES.values() for own in cls.params())
+
+
 def space_bounds(space: SpaceConfig, kind: str, name: str) -> Bounds:
     """The range a search draws parameter ``name`` of ``kind`` from: search.space.ranges.<name>,
-    search.space.<name> (beta1, beta2, eps), else the range the schedule class declares."""
+    search.space.<name> for the package kinds' beta1, beta2 and eps, else the range the schedule class declares."""
     if name in space.ranges:
         return space.ranges[name]
-    if name in ("beta1", "beta2", "eps"):
+    if package_setting(kind, name):
         return getattr(space, name)
-    meta = next(item.metadata for item in schedule_class(kind).params() if item.name == name)
+    meta = declaration(kind, name).metadata
     return Bounds(meta["low"], meta["high"])
 
 
@@ -147,6 +165,29 @@ def searched_bounds(space: SpaceConfig) -> dict[str, Bounds]:
     """The ranges the search draws from, by parameter name (unused ranges left out)."""
     named = {name: space_bounds(space, kind, name) for kind in space.kinds for name in kind_params(kind)}
     return {**named, REWARD_PARAM: space.lambda_h} if space.lambda_h is not None else named
+
+
+def shown_bounds(bounds: Bounds) -> str:
+    """A range for messages: ``[0, 0.5]``, ``[0.01, 1, log]``."""
+    ends = ", ".join(f"{end:g}" if _is_number(end) else repr(end) for end in (bounds.low, bounds.high))
+    return f"[{ends}{', log' if bounds.log else ''}]"
+
+
+def check_shared_settings(space: SpaceConfig) -> None:
+    """ConfigError unless each setting several searched kinds draw is drawn one way (one type, one range): Optuna
+    draws a name one way, and the study's identity holds one range per name."""
+    first: dict[str, str] = {}  # setting -> the first searched kind drawing it
+    for kind in space.kinds:
+        for name in kind_params(kind):
+            other = first.setdefault(name, kind)
+            if whole_number(other, name) != whole_number(kind, name):
+                whole, real = (other, kind) if whole_number(other, name) else (kind, other)
+                raise ConfigError(f"search.space.kinds: {whole} declares {name} a whole number and {real} does not; "
+                                  "rename it in one of the classes")
+            ours, theirs = space_bounds(space, other, name), space_bounds(space, kind, name)
+            _check(ours is theirs or ours == theirs,
+                   f"search.space.kinds: {other} and {kind} both search {name}, over {shown_bounds(ours)} and "
+                   f"{shown_bounds(theirs)}; give it one range, search.space.ranges.{name}={{low: ..., high: ...}}")
 
 
 def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
@@ -173,6 +214,7 @@ def check_space(space: SpaceConfig) -> None:
     for name in space.ranges:
         _check(name in drawn, f"search.space.ranges.{name}: no searched kind draws {name}; they draw "
                               f"{', '.join(sorted(drawn))}")
+    check_shared_settings(space)
     for name, bounds in searched_bounds(space).items():
         where = f"search.space.{'ranges.' if name in space.ranges else ''}{name}"
         _check(_is_number(bounds.low) and _is_number(bounds.high),
@@ -232,8 +274,12 @@ def taken_by(params: dict[str, Any], kinds: list[str]) -> bool:
 
 
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
-    """An enqueued set as Optuna stores it (:func:`hersd.contract.study.stored_params`), its kind inferred."""
-    return stored_params({"kind": enqueued_kind(params, kinds), **params}, kinds)
+    """An enqueued set as Optuna stores it (:func:`hersd.contract.study.stored_params`), its kind inferred, the kind's
+    settings it leaves out at their declared defaults (a left-out lambda_h is drawn)."""
+    kind = enqueued_kind(params, kinds)
+    defaults = {item.name: item.default for item in schedule_class(kind).params()
+                if item.name in kind_params(kind) and isinstance(item.default, (int, float))}
+    return stored_params({"kind": kind, **defaults, **params}, kinds)
 
 
 def check_enqueue(search: SearchConfig) -> None:

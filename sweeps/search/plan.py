@@ -49,7 +49,7 @@ class SearchPlan:
 
 def refuse_searched_keys(train_overrides: list[str], search: SearchConfig) -> None:
     """ConfigError if a training override sets what the search chooses (seed, schedule*, run_dir, lambda_h)."""
-    taken = SEARCHED_KEYS + (("algo.lambda_h",) if search.space.lambda_h is not None else ())
+    taken = SEARCHED_KEYS + ((f"algo.{REWARD_PARAM}",) if search.space.lambda_h is not None else ())
     for override in train_overrides:
         key = override.split("=", 1)[0].lstrip("+~")
         if key in taken or key.startswith("schedule."):

@@ -276,5 +276,5 @@ def fast_learner_class(cls: type[GoalConditionedLearner]) -> type[GoalConditione
     """The class of ``update=fast`` for learner class ``cls``; ConfigError (one line) if it has none."""
     if cls not in FAST_CLASSES:
         raise ConfigError(f"update=fast: learner {getattr(cls, 'NAME', cls.__name__)} has no fast update "
-                          f"(ddpg and td3 have one); use update=autograd")
+                          f"({' and '.join(base.NAME for base in FAST_CLASSES)} have one); use update=autograd")
     return FAST_CLASSES[cls]
