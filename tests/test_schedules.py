@@ -345,3 +345,14 @@ def test_a_rate_that_is_no_number_in_0_1_says_what_it_is(rate, shown):
 
     with pytest.raises(ScheduleRateError, match=rf"its rate at epoch 1 of 10 is {re.escape(shown)}, not in \[0, 1\]"):
         Odd().checked_rate(1, 10)
+
+
+@pytest.mark.parametrize("low, high", [(None, None), (1.0, 0.0), ("0", 1.0), (False, 1.0)])
+def test_a_param_range_that_is_not_two_ordered_numbers_is_one_line(low, high):
+    """param(0.5, None, None, ...) passed, then a search or check failed on "'<=' not supported"."""
+    from hersd.contract.errors import ConfigError
+    from hersd.contract.schedules import param
+
+    with pytest.raises(ConfigError, match=r"^param\(0\.5, .*\): its range must be two numbers, low <= high"):
+        param(0.5, low, high, "the rate")
+    assert param(3, 1, float("inf"), "epochs", integer=True).metadata["high"] == float("inf")

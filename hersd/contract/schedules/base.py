@@ -38,7 +38,11 @@ class ScheduleRateError(ConfigError):
 
 def param(default: Any, low: float, high: float, doc: str, integer: bool = False, optional: bool = False) -> Any:
     """A schedule parameter: ``default``, its range [low, high], a one-line ``doc``; ``integer`` for whole
-    numbers, ``optional`` when null is allowed (the default then is usually None)."""
+    numbers, ``optional`` when null is allowed (the default then is usually None); ConfigError (one line) for a
+    range that is not two numbers, low <= high."""
+    if not all(isinstance(end, numbers.Real) and not isinstance(end, bool) for end in (low, high)) or low > high:
+        raise ConfigError(f"param({default!r}, {low!r}, {high!r}, {doc!r}): its range must be two numbers, "
+                          "low <= high (e.g. param(0.5, 0.0, 1.0, \"...\"))")
     return field(default=default, metadata={"low": low, "high": high, "doc": doc, "integer": integer,
                                             "optional": optional})
 
