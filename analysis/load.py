@@ -80,15 +80,16 @@ def preset_weights(algo: str) -> tuple[float, float]:
 # schema's) and ARCHER's (conf/algo/archer.yaml: hindsight rewards halved).
 HER_EPS = Constant().eps
 HER_WEIGHTS = (AlgoConfig().lambda_r, AlgoConfig().lambda_h)
-ARCHER_WEIGHTS = preset_weights("archer")
+ARCHER = "archer"  # ARCHER's algo preset (conf/algo/archer.yaml), the name its runs log as config.algo.name
+ARCHER_WEIGHTS = preset_weights(ARCHER)
+PAPER_EPOCHS = TrainConfig().epochs  # K of the paper's runs (the default): the one K a label leaves unsaid
+PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
+READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
 
 
 def is_archer(algo: str) -> bool:
     """Whether a run's logged ``algo`` name (config.algo.name) is ARCHER's, with or without MEP."""
-    return algo.removesuffix("_mep") == "archer"
-PAPER_EPOCHS = TrainConfig().epochs  # K of the paper's runs (the default): the one K a label leaves unsaid
-PARALLEL_FROM = 64  # logs: fewer are read in this process (forking costs more than it saves)
-READ_BATCHES = 16  # jobs the logs are split into when read in parallel (the cores finish together)
+    return algo.removesuffix("_mep") == ARCHER
 
 
 class ReportInputError(ValueError):
@@ -104,7 +105,7 @@ class RunTable:
     skipped: list[str] = field(default_factory=list)
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
     missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
-    copies: list[str] = field(default_factory=list)  # one line per second log of a run already read, left out
+    copies: list[str] = field(default_factory=list)  # lines naming the second logs of runs read, left out
     left_out: int = 0  # logs found and not read: unreadable, of a schedule class not importable here, or copies
 
     def warnings(self) -> list[str]:
@@ -330,13 +331,32 @@ class LogReading:
 
 def one_log_per_run(logs: list[ReadLog]) -> tuple[list[ReadLog], list[str]]:
     """One log per run (``run_id``: config and seed), so a copied folder is not a second seed: the complete
-    one, else the one with the most epochs; and a line per copy left out."""
+    one, else the one with the most epochs; and the lines naming those left out: copies (the same first session)
+    one line per top folder, other runs of the same config and seed (trained apart) one line each."""
     kept: dict[str, ReadLog] = {}
     for log in sorted(logs, key=lambda log: (not log.row["complete"], -log.row["epochs_done"])):
         kept.setdefault(log.row["run_id"], log)
-    copies = [f"{log.row['path']}: a copy of run {log.row['run_id']} ({kept[log.row['run_id']].row['path']}, "
-              "the one read), left out" for log in logs if kept[log.row["run_id"]] is not log]
-    return [log for log in logs if kept[log.row["run_id"]] is log], copies
+    copies: dict[str, list[tuple[str, str]]] = {}  # top folder -> (copy, the log read)
+    lines = []
+    for log in (log for log in logs if kept[log.row["run_id"]] is not log):
+        read = kept[log.row["run_id"]]
+        if _first_start(log) == _first_start(read):
+            copies.setdefault(log.row["path"].split("/")[0], []).append((log.row["path"], read.row["path"]))
+        else:
+            lines.append(f"{log.row['path']}: another run of the config and seed of {read.row['path']} (run "
+                         f"{log.row['run_id']}), trained apart; that one is read, this one left out: report their "
+                         "folders apart to compare them")
+    for top, pairs in copies.items():
+        (path, read), more = pairs[0], len(pairs) - 1
+        lines.append(f"{path}: a copy of {read} (the one read), left out" if not more else
+                     f"{top}/: {len(pairs)} run logs copying runs read elsewhere (e.g. {path}, a copy of {read}), "
+                     "left out")
+    return [log for log in logs if kept[log.row["run_id"]] is log], lines
+
+
+def _first_start(log: ReadLog) -> Any:
+    """When the log's first session started (ns), None for a log without sessions."""
+    return log.sessions[0]["started"] if log.sessions else None
 
 
 def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:

@@ -267,8 +267,7 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
              "curves only, left out of every table and median), "
              f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
              f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
-    skipped = [f"log {line}" for line in table.skipped] + [f"study storage {line}" for line in studies.skipped]
-    skipped += table.missing_schedules + table.copies
+    skipped = table.warnings() + [f"skipped study storage {line}" for line in studies.skipped]
     if skipped:
         parts.append("<p>Skipped:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
                      + "</ul>")

@@ -197,39 +197,28 @@ def test_logs_read_in_worker_processes_give_the_same_tables(sweep, monkeypatch, 
 
 
 def test_copies_of_one_run_count_once_the_complete_or_longest_read(tmp_path, capsys):
-    """A copied run folder is the same run (run_id), not another seed: one is read, each copy named."""
+    """A copied run folder is the same run (run_id, first session), not another seed: one is read, the copies
+    named one line per top folder; a run of the same config and seed trained apart is named as that."""
     config = make_config(epochs=6)
     write_run(tmp_path / "a_partial", config, np.linspace(0, 0.5, 4), complete=False)
     write_run(tmp_path / "b_run", config, np.linspace(0, 1, 6))
-    write_run(tmp_path / "c_backup", config, np.linspace(0, 1, 6))
-    write_run(tmp_path / "d_other_seed", make_config(epochs=6, seed=1), np.linspace(0, 1, 6))
+    for copy in ("c1", "c2"):
+        write_run(tmp_path / "c_backup" / copy, config, np.linspace(0, 1, 6))
+    write_run(tmp_path / "d_again", config, np.linspace(0, 1, 6), meta={"start_time": "2025-02-01T00:00:00+0000"})
+    write_run(tmp_path / "e_other_seed", make_config(epochs=6, seed=1), np.linspace(0, 1, 6))
     table = load_runs(tmp_path)
-    assert sorted(table.runs["path"]) == ["b_run/run.mcap", "d_other_seed/run.mcap"]
-    assert len(table.epochs) == 12 and not table.skipped and table.left_out == 2
-    assert [line.split(":")[0] for line in table.copies] == ["a_partial/run.mcap", "c_backup/run.mcap"]
-    assert all("(b_run/run.mcap, the one read), left out" in line for line in table.copies)
+    assert sorted(table.runs["path"]) == ["b_run/run.mcap", "e_other_seed/run.mcap"]
+    assert len(table.epochs) == 12 and not table.skipped and table.left_out == 4
+    assert table.copies == [
+        f"d_again/run.mcap: another run of the config and seed of b_run/run.mcap (run {table.runs['run_id'][0]}), "
+        "trained apart; that one is read, this one left out: report their folders apart to compare them",
+        "a_partial/run.mcap: a copy of b_run/run.mcap (the one read), left out",
+        "c_backup/: 2 run logs copying runs read elsewhere (e.g. c_backup/c1/run.mcap, a copy of b_run/run.mcap), "
+        "left out"]
     assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"warning: {line}" for line in table.copies]
-    assert "c_backup/run.mcap: a copy of run" in (tmp_path / "report" / "index.html").read_text()
-
-
-def test_an_unimportable_schedule_class_is_one_warning_naming_it_and_the_fix(tmp_path, capsys):
-    """Two runs of a user's schedule class whose module is not on PYTHONPATH beside a HER run: one warning line
-    naming the class and the fix, not one "lacks or mistypes a config field" per run."""
-    write_run(tmp_path / "her", make_config(), np.zeros(6))
-    record = config_record(make_config())
-    record["schedule"] = {"kind": "users_own_steps.Step", "k0": 3}
-    for seed in (0, 1):
-        write_run(tmp_path / f"step{seed}", make_config(seed=seed), np.zeros(6),
-                  meta={"config": {**record, "seed": seed}})
-    table = load_runs(tmp_path)
-    assert len(table.runs) == 1 and not table.skipped and len(table.missing_schedules) == 1 and table.left_out == 2
-    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
-    (line,) = capsys.readouterr().err.strip().splitlines()
-    assert line.startswith("warning: schedule class users_own_steps.Step cannot be imported")
-    assert "2 run logs skipped (step0/run.mcap and others)" in line and "on PYTHONPATH" in line
-    assert "lacks or mistypes" not in line
+    assert "c_backup/: 2 run logs copying runs" in (tmp_path / "report" / "index.html").read_text()
 
 
 def test_a_schedule_module_that_fails_to_import_is_one_warning_saying_to_fix_it(tmp_path, monkeypatch, capsys):

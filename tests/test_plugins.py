@@ -8,7 +8,9 @@ from hersd.contract.errors import ConfigError
 from hersd.contract.plugins import class_at
 
 MODULES = {"__init__.py": "", "steps.py": "class Step:\n    pass\n", "broken.py": "x = (\n",
-           "raising.py": "import math\nraise RuntimeError('no settings file')\n"}
+           "raising.py": "import math\nraise RuntimeError('no settings file')\n",
+           "valueerror.py": "import json\n\nSETTINGS = json.loads('{')\n",
+           "needs.py": "import no_such_dependency_plugins\n"}
 
 
 @pytest.fixture
@@ -31,6 +33,11 @@ def test_a_class_is_found_by_its_path(user_pkg):
                                   r"raised SyntaxError: '\(' was never closed \(broken\.py, line 1\); fix that module$"),
     ("user_pkg_plugins.raising.X", r"^schedule class user_pkg_plugins\.raising\.X: importing user_pkg_plugins\.raising "
                                    r"raised RuntimeError: no settings file at .*raising\.py:2; fix that module$"),
+    ("user_pkg_plugins.valueerror.X", r"^schedule class user_pkg_plugins\.valueerror\.X: importing "
+                                      r"user_pkg_plugins\.valueerror raised JSONDecodeError: .* at .*valueerror\.py:3; "
+                                      r"fix that module$"),
+    ("user_pkg_plugins.needs.X", r"raised ModuleNotFoundError: No module named 'no_such_dependency_plugins' at "
+                                 r".*needs\.py:1; fix that module$"),
     ("user_pkg_plugins.steps", r"^schedule class user_pkg_plugins\.steps: user_pkg_plugins\.steps is a module; "
                                r"give <module>\.<Class>$"),
     ("user_pkg_plugins.steps.Nope", r"has no attribute 'Nope'\); is its module on PYTHONPATH\?$"),

@@ -320,7 +320,7 @@ def test_a_subclass_of_a_package_kind_names_its_own_folder_and_label():
 
 @pytest.mark.parametrize("rate, taken", [(np.where(True, 0.9, 0.5), 0.9), (np.int64(1), 1.0), (np.float32(0.5), 0.5),
                                          (np.array([0.25]), 0.25)])
-def test_a_rate_given_as_a_numpy_scalar_or_0_d_array_is_taken(rate, taken):
+def test_a_rate_given_as_a_numpy_scalar_or_one_element_array_is_taken(rate, taken):
     """np.where(k <= k0, 0.9, 0.5) is a 0-d array: it was refused as "is 0.9, not in [0, 1]"."""
     from hersd.contract.schedules import Schedule
 

@@ -149,11 +149,15 @@ def test_the_search_parameter_names_are_typed_once() -> None:
         assert not [names for names in tuples if set(PAPER_SETTINGS) <= names], path
 
 
-def test_an_enqueued_set_leaving_a_setting_out_takes_the_kinds_default(tmp_path: Path) -> None:
+def test_an_enqueued_set_leaving_a_setting_out_takes_it_as_schedule_kind_sets_it(tmp_path: Path) -> None:
+    """Its preset's value (exponential's beta2 = 0.25: the class's 0.0 would be the linear schedule), else the
+    class's default (HER's eps)."""
     def fixed(search: str, *overrides: str) -> list[dict]:
         plan = make_plan(compose_search(search, list(overrides)), tiny_search(tmp_path), search)
         return [trial.system_attrs["fixed_params"] for trial in open_study(plan, optuna.storages.InMemoryStorage()).trials]
 
     assert fixed("wide")[0] == {"kind": "constant", "eps": HER_RATE}  # conf/search/wide.yaml's HER point
     assert fixed("wide", "search.enqueue=[{kind: constant}, {kind: exponential, beta1: 0.25}]") == [
-        {"kind": "constant", "eps": HER_RATE}, {"kind": "exponential", "beta1": 0.25, "beta2": 0.0}]
+        {"kind": "constant", "eps": HER_RATE}, {"kind": "exponential", "beta1": 0.25, "beta2": 0.25}]
+    assert fixed("wide", "search.enqueue=[{kind: linear}, {kind: exponential, beta2: 1.0}]") == [
+        {"kind": "linear", "beta1": 0.25}, {"kind": "exponential", "beta1": 0.25, "beta2": 1.0}]

@@ -172,6 +172,21 @@ def test_train_help_lists_the_settings_of_the_learner_the_command_names(user_lat
     assert ended.value.code == 2 and capsys.readouterr().err.startswith("hersd-train: error: learner class nosuch.X")
 
 
+def test_train_help_lists_a_learner_config_of_ones_own_and_its_settings(user_late, capsys):
+    """``learner=mylate hydra.searchpath=[file://<folder>]``, the route docs/LEARNERS.md gives for a learner of
+    one's own beside the package's in a sweep: --help said "learner='mylate' is unknown"."""
+    from hersd.engine.cli import main as train_main
+
+    (user_late / "conf" / "learner").mkdir(parents=True)
+    (user_late / "conf" / "learner" / "mylate.yaml").write_text("_target_: user_late.TD3Late\ntd3late: {actor_start: 2}\n")
+    train_main(["learner=mylate", f"hydra.searchpath=[file://{user_late / 'conf'}]", "--help"])
+    out = capsys.readouterr().out
+    assert "|mylate|" in next(line for line in out.splitlines() if line.startswith("  learner="))
+    shown = out.split("learners named on the command line (their settings):\n")[1].splitlines()
+    assert shown[0] == "  user_late.TD3Late:" and any(line.split()[0] == "learner.td3late.actor_start=4"
+                                                      for line in shown[1:])
+
+
 def test_a_class_chosen_by_its_path_that_declares_a_name_nothing_finds_is_refused(user_late):
     """RegisteredLate declares NAME = "late": chosen by its path its logs would record "late", which a fresh
     process (hersd-render of its runs) finds only through its entry point."""

@@ -185,6 +185,12 @@ class DDPGConfig:
                    f"or null, got {self.gamma}")
 
 
+def no_fast_update(name: str) -> str:
+    """The line refusing ``update=fast`` for learner ``name``, which has no hand-written update."""
+    return f"update=fast: learner {name} has no fast update ({' and '.join(FAST_UPDATE_LEARNERS)} have one); " \
+           "use update=autograd"
+
+
 # The key of the learner whose settings learner_settings is building: a subclass's settings are checked by its
 # parent's __post_init__, whose messages then name the subclass's key (learner.td3late.*), not the parent's.
 _SETTINGS_KEY: ContextVar[Optional[str]] = ContextVar("learner_settings_key", default=None)
@@ -287,7 +293,8 @@ def learner_from_config(node: Any) -> LearnerConfig:
     parents = parent_keys(name) if sections else set()
     for key, section in sections.items():
         _check(key not in parents, f"learner {name} reads learner.{own_key}.*, not learner.{key}.* (its parent's): "
-               f"set learner.{own_key}.<setting>")
+               f"set learner.{own_key}.<setting>; in a sweep beside {key}, give {key}'s settings in a learner "
+               f"config of your own (name: {key} and {key}: {{<setting>: <value>}}; docs/LEARNERS.md)")
         _check(PACKAGE_LEARNERS.get(key) is not None, no_setting(name, settings_class, key))
         learner_settings(key, PACKAGE_LEARNERS[key], section)
     _check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
@@ -432,9 +439,7 @@ class TrainConfig:
         self.learner = learner_from_config(self.learner)
         _check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
         _check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
-               f"update=fast: learner {self.learner.name} has no fast update "
-               f"({' and '.join(FAST_UPDATE_LEARNERS)} have one); "
-               "use update=autograd")
+               no_fast_update(self.learner.name))
         _check(self.update == "autograd" or self.precision == "fp32",
                "update=fast is a float32 path: use it with precision=fp32")
         if isinstance(self.schedule, Schedule):

@@ -27,17 +27,18 @@ def entry_point_names(group: str) -> list[str]:
 
 def class_at(path: str, what: str) -> Any:
     """The object at the import path ``<module>.<Class>``; ConfigError (one line naming ``what``, e.g.
-    "schedule") if its module cannot be imported or lacks it."""
+    "schedule") if its module is not found, fails as it is imported, or lacks it."""
     module, _, name = path.rpartition(".")
+    if not module:
+        raise ConfigError(f"{what} class {path}: give its import path, <module>.<Class>")
     try:
         found = importlib.import_module(module)
-    except (ImportError, ValueError) as err:
+    except ModuleNotFoundError as err:
+        if err.name is None or not (module == err.name or module.startswith(f"{err.name}.")):
+            raise ConfigError(_failed(what, path, module, err)) from None  # the module found, one it imports not
         raise ConfigError(f"{what} class {path} cannot be imported ({err}); is its module on PYTHONPATH?") from None
-    except Exception as err:  # the module's own code failed: a SyntaxError (its text names the line), a raise
-        frames = traceback.extract_tb(err.__traceback__)
-        at = "" if isinstance(err, SyntaxError) or not frames else f" at {frames[-1].filename}:{frames[-1].lineno}"
-        raise ConfigError(f"{what} class {path}: importing {module} raised {type(err).__name__}: {err}{at}; "
-                          "fix that module") from None
+    except Exception as err:  # the module's own code failed: a SyntaxError, an error it raises
+        raise ConfigError(_failed(what, path, module, err)) from None
     found = getattr(found, name, None)
     if isinstance(found, types.ModuleType) or found is None and _is_module(path):
         raise ConfigError(f"{what} class {path}: {path} is a module; give <module>.<Class>")
@@ -47,8 +48,23 @@ def class_at(path: str, what: str) -> Any:
     return found
 
 
-def _is_module(path: str) -> bool:
+def _failed(what: str, path: str, module: str, err: BaseException) -> str:
+    """The line for a module that failed as it was imported: the error, where in the module (a SyntaxError's own
+    text names the line), and the fix."""
+    spec = _spec(module)
+    own = [frame for frame in traceback.extract_tb(err.__traceback__) if spec and frame.filename == spec.origin]
+    at = f" at {own[-1].filename}:{own[-1].lineno}" if own and not isinstance(err, SyntaxError) else ""
+    text = " ".join(str(err).split())
+    return f"{what} class {path}: importing {module} raised {type(err).__name__}: {text}{at}; fix that module"
+
+
+def _spec(module: str) -> Any:
+    """The module's import spec, None if there is none (or its parent is no package)."""
     try:
-        return importlib.util.find_spec(path) is not None
-    except (ImportError, ValueError):  # its parent is no package
-        return False
+        return importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        return None
+
+
+def _is_module(path: str) -> bool:
+    return _spec(path) is not None

@@ -98,14 +98,19 @@ def chosen_schedules(argv: list[str]) -> list[str]:
     named = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
     presets = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0] == "schedule"]
     if any(preset not in group_choices("schedule") for preset in presets):
-        from hydra.errors import HydraException
-        from omegaconf.errors import OmegaConfBaseException
-
-        try:
-            named.append(kind_name(type(compose_train([arg for arg in argv if arg not in HELP_FLAGS]).schedule)))
-        except (HydraException, OmegaConfBaseException) as err:
-            raise ConfigError(explain_config_error(err)) from None
+        named.append(kind_name(type(composed(argv).schedule)))
     return named
+
+
+def composed(argv: list[str]) -> TrainConfig:
+    """The run config of a --help command line (less the flag); ConfigError (one line) if it does not compose."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        return compose_train([arg for arg in argv if arg not in HELP_FLAGS])
+    except (HydraException, OmegaConfBaseException) as err:
+        raise ConfigError(explain_config_error(err)) from None
 
 
 def searched_folders(argv: list[str]) -> list[Path]:
@@ -126,6 +131,9 @@ def learner_lines(argv: list[str]) -> list[str]:
     (``learner=``, ``learner.name=``, ``learner._target_=``) beyond the package's, whose settings the keys list."""
     keys = ("learner", "learner.name", f"learner.{TARGET_KEY}")
     named = [name for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys for name in arg.split("=", 1)[1].split(",")]
+    presets = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0] == "learner"]
+    if any(preset not in group_choices("learner") for preset in presets):  # a config of one's own: its learner
+        named = [name for name in named if name not in presets] + [composed(argv).learner.name]
     lines = []
     for name in dict.fromkeys(named):
         if name in PACKAGE_LEARNERS:

@@ -11,9 +11,13 @@ import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
+from importlib.resources import files
 from typing import Any, Dict, Optional
 
-from hersd.contract.compose import compose, explain_config_error, group_options, register_schema as store_schema
+from omegaconf import OmegaConf
+
+from hersd.contract.compose import (CONFIG_MODULE, compose, explain_config_error, group_options,
+                                    register_schema as store_schema)
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
@@ -274,12 +278,22 @@ def taken_by(params: dict[str, Any], kinds: list[str]) -> bool:
 
 
 def enqueued_params(params: dict[str, Any], kinds: list[str]) -> dict[str, Any]:
-    """An enqueued set as Optuna stores it (:func:`hersd.contract.study.stored_params`), its kind inferred, the kind's
-    settings it leaves out at their declared defaults (a left-out lambda_h is drawn)."""
+    """An enqueued set as Optuna stores it (:func:`hersd.contract.study.stored_params`), its kind inferred, the
+    kind's settings it leaves out as ``schedule=<kind>`` sets them (a left-out lambda_h is drawn)."""
     kind = enqueued_kind(params, kinds)
-    defaults = {item.name: item.default for item in schedule_class(kind).params()
-                if item.name in kind_params(kind) and isinstance(item.default, (int, float))}
+    defaults = {name: value for name, value in kind_defaults(kind).items() if name in kind_params(kind)}
     return stored_params({"kind": kind, **defaults, **params}, kinds)
+
+
+def kind_defaults(kind: str) -> dict[str, Any]:
+    """The settings of a run given ``schedule=<kind>``: its preset's (conf/schedule/<kind>.yaml, e.g. exponential's
+    beta1 = beta2 = 0.25), else the class's declared defaults (HER's eps = 0.8; a class of one's own)."""
+    declared = {item.name: item.default for item in schedule_class(kind).params()
+                if isinstance(item.default, (int, float)) and not isinstance(item.default, bool)}
+    if kind not in group_options("schedule"):
+        return declared
+    preset = OmegaConf.to_container(OmegaConf.load(files(CONFIG_MODULE) / "schedule" / f"{kind}.yaml")) or {}
+    return {**declared, **{name: value for name, value in preset.items() if name in declared}}
 
 
 def check_enqueue(search: SearchConfig) -> None:

@@ -97,7 +97,7 @@ class Schedule:
     def checked_rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         """:meth:`rate`, or ScheduleRateError (one line) when it is not a number in [0, 1]."""
         rate = self.rate(k, total_epochs, train_success)
-        if isinstance(rate, np.ndarray) and rate.size == 1:  # np.where(...) of a scalar: a 0-d array
+        if isinstance(rate, np.ndarray) and rate.size == 1:  # np.where(...) of a scalar: a 0-d array (or [x])
             rate = rate.item()
         is_number = isinstance(rate, numbers.Real) and not isinstance(rate, bool)  # numpy's scalars too
         if not (is_number and 0.0 <= rate <= 1.0):  # NaN fails too

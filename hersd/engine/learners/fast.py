@@ -32,6 +32,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from hersd.contract.config import no_fast_update
 from hersd.contract.errors import ConfigError
 from hersd.engine.learners.base import GoalConditionedLearner, RunningNormalizer, UpdateStats
 from hersd.engine.learners.ddpg import DDPG
@@ -275,6 +276,5 @@ FAST_CLASSES: dict[type, type] = {DDPG: FastDDPG, TD3: FastTD3}
 def fast_learner_class(cls: type[GoalConditionedLearner]) -> type[GoalConditionedLearner]:
     """The class of ``update=fast`` for learner class ``cls``; ConfigError (one line) if it has none."""
     if cls not in FAST_CLASSES:
-        raise ConfigError(f"update=fast: learner {getattr(cls, 'NAME', cls.__name__)} has no fast update "
-                          f"({' and '.join(base.NAME for base in FAST_CLASSES)} have one); use update=autograd")
+        raise ConfigError(no_fast_update(getattr(cls, "NAME", cls.__name__)))
     return FAST_CLASSES[cls]
