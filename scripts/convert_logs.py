@@ -10,7 +10,8 @@ gives back as before. A log without a footer (a killed or running writer of the 
 format) keeps every complete message. Each file is replaced through a temporary file and a
 rename; a log already in the current format is left untouched, so running it again changes
 nothing. One line per log: ``converted`` or ``unchanged``, with its epochs; an unreadable one
-is named and the exit status is 1. Do not convert the log of a run that is writing it: convert
+is named and the exit status is 1; a path that is no folder stops it before any
+conversion (exit status 2). Do not convert the log of a run that is writing it: convert
 after it stops (an older hersd would keep appending to the file it has open).
 """
 
@@ -36,6 +37,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="scripts/convert_logs.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("folders", nargs="+", type=Path, help="folders searched for run.mcap files")
     args = parser.parse_args(argv)
+    for folder in args.folders:
+        if not folder.is_dir():
+            parser.exit(2, f"scripts/convert_logs.py: error: no folder {folder}\n")
     failed = 0
     for folder in args.folders:
         for path in sorted(folder.rglob(LOG_NAME)):

@@ -113,6 +113,14 @@ def commit_run(run_dir: Path, relative: Path, state: str) -> str:
     return f"committed: {message}"
 
 
+def say(line: str) -> None:
+    """One line on stdout; a reader that went away (``| head``) ends the lines, not the landing."""
+    try:
+        print(line, flush=True)
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="scripts/land.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("campaign", nargs="?", type=Path, default=Path.home() / "hersd-campaign",
@@ -124,6 +132,10 @@ def main(argv: list[str] | None = None) -> int:
     campaign = args.campaign.expanduser()
     if not campaign.is_dir():
         parser.exit(2, f"scripts/land.py: error: no folder {campaign}; pass the sweep's results_dir\n")
+    try:
+        args.into.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        parser.exit(2, f"scripts/land.py: error: --into {args.into}: not a folder it can write ({err.strerror})\n")
     failed = 0
     logs = sorted(log for log in campaign.rglob(LOG_NAME)
                   if not any(part.startswith(".") for part in log.relative_to(campaign).parts))
@@ -137,8 +149,8 @@ def main(argv: list[str] | None = None) -> int:
                 note = "; " + commit_run(target, relative, state)
             except RuntimeError as err:
                 note, failed = f"; {err}", failed + 1
-        print(f"{verb:<9} {target / LOG_NAME}  {state}{note}", flush=True)
-    print(f"{len(logs)} run(s) in {campaign} landed in {args.into}" + (f"; {failed} not committed" if failed else ""))
+        say(f"{verb:<9} {target / LOG_NAME}  {state}{note}")
+    say(f"{len(logs)} run(s) in {campaign} landed in {args.into}" + (f"; {failed} not committed" if failed else ""))
     return 1 if failed else 0
 
 

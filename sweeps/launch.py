@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import time
 import traceback
@@ -21,7 +22,7 @@ from typing import Any, Callable
 
 from omegaconf import DictConfig
 
-from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choices, group_options
+from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choices, group_options, null_group
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import available_cores, resolve_threads
@@ -254,6 +255,7 @@ def main() -> None:
         print(usage())
         return
     if "--dry-run" in sys.argv:
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # a listing: a reader gone (``| head``) ends it quietly
         sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
     for arg in sys.argv[1:]:  # a class by its path is no config of the group: one line saying what selects it
         key, _, value = arg.partition("=")
@@ -265,6 +267,8 @@ def main() -> None:
     _hydra_full_error = os.environ.get("HYDRA_FULL_ERROR", "0")
     os.environ["HYDRA_FULL_ERROR"] = "1"  # a composition error reaches the except below; sweep_runs restores it
     try:
+        if said := null_group(sys.argv[1:]):
+            raise ConfigError(said)
         hydra.main(config_path=CONFIG_PATH, config_name="sweep", version_base="1.3")(run_job)()
     except KeyboardInterrupt:
         print("hersd-sweep: interrupted; finished runs and epochs are kept: re-run the same command to resume",

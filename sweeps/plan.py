@@ -35,7 +35,8 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from hersd.contract.compose import explain_config_error, open_schedule, register_schema, register_train_schema
+from hersd.contract.compose import (explain_config_error, null_group, open_schedule, register_schema,
+                                   register_train_schema)
 from hersd.contract.config import TrainConfig, to_train_config
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
@@ -167,6 +168,8 @@ class JobConfigs:
         values = [override for override, is_value in parsed if is_value]
         choices = [override for override, is_value in parsed if not is_value]
         key = tuple(override.input_line for override in choices)
+        if said := null_group(list(key)):
+            raise ConfigError(said)
         if key not in self.composed:
             composed = self.loader.load_sweep_config(self.sweep_config, list(key))
             with open_dict(composed):
@@ -183,6 +186,10 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     parser = OverridesParser.create(config_loader=sweeper.hydra_context.config_loader)
+    for override in parser.parse_overrides(arguments):
+        if override.key_or_group == "grid" and override.is_sweep_override():  # Hydra would read no grid's params
+            raise SweepError(f"{override.input_line}: a sweep runs one grid; run hersd-sweep once per grid",
+                             exit_code=2)
     seeds = int(sweeper.config.seeds)
     jobs = [job for stage in grid_stages(sweeper.grid)
             for job in seed_by_seed([expand(with_seeds(grid, arguments, seeds), arguments, parser) for grid in stage])]
@@ -193,6 +200,9 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
     for job in jobs:
         try:
             train_cfg = job_train_config(configs.config(job))
+            if train_cfg.run_dir is not None and len(jobs) > 1:  # each run would be planned into the first's folder
+                raise SweepError(f"run_dir={train_cfg.run_dir} would put the sweep's {len(jobs)} runs in one folder; "
+                                 "leave it out: each run gets its own under results_dir", exit_code=2)
             planned.setdefault(run_dir(train_cfg), PlannedRun(job, train_cfg.epochs))
         except (ConfigError, HydraException, OmegaConfBaseException) as err:  # e.g. a swept value no config names
             said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")

@@ -139,6 +139,13 @@ def test_an_env_that_does_not_report_success_is_refused_before_the_run_in_one_li
     assert "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("env_id", ["FetchReach", "gymnasium_robotics:FetchReach-v4"])
+def test_an_id_gym_make_resolves_takes_the_episode_length_of_the_env_it_made(env_id):
+    env = make_env(compose_train(["task=custom", f"task.env_id={env_id}"]).task)
+    assert env_spec(env).horizon == 50
+    env.close()
+
+
 class GoalEnvWithoutEpisodeLength(gym.Env):
     observation_space = gym.spaces.Dict({key: gym.spaces.Box(-1, 1, (2,)) for key in
                                          ("observation", "achieved_goal", "desired_goal")})

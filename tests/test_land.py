@@ -3,6 +3,7 @@ atomically, never a complete log replaced by an unfinished one, each complete ru
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -125,3 +126,25 @@ def test_logs_of_the_earlier_format_land_in_the_current_one_with_every_message_i
 def test_a_missing_campaign_folder_is_one_line_and_exit_2(tmp_path, repo):
     result = land(tmp_path / "nowhere", repo)
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "no folder" in result.stderr
+
+
+@pytest.mark.parametrize("into", ["file", "file/results"])
+def test_an_into_that_cannot_be_a_folder_is_one_line_and_exit_2(tmp_path, into):
+    write_log(tmp_path / "campaign" / RUNNING, 3)
+    (tmp_path / "file").write_text("")
+    result = subprocess.run([*LAND, str(tmp_path / "campaign"), "--into", str(tmp_path / into)], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1 and "not a folder it can write" in result.stderr
+
+
+def test_a_reader_that_went_away_ends_the_lines_not_the_landing(tmp_path, repo):
+    campaign = tmp_path / "campaign"
+    for run in (DONE, RUNNING):
+        write_log(campaign / run, 3)
+    read, write = os.pipe()
+    os.close(read)  # as `| head` does once it has its lines
+    landed = subprocess.run([*LAND, str(campaign), "--into", str(repo / "results")], stdout=write,
+                            stderr=subprocess.PIPE, text=True, timeout=120)
+    os.close(write)
+    assert landed.returncode == 0 and not landed.stderr
+    assert all((repo / "results" / run / "run.mcap").is_file() for run in (DONE, RUNNING))

@@ -81,6 +81,15 @@ def test_hersd_render_refuses_another_epoch_in_one_line(runs, capsys, args, expe
     assert expected in err and err.count("\n") == 1, err
 
 
+def test_hersd_render_refuses_an_out_it_cannot_write_in_one_line(runs, tmp_path, capsys):
+    (tmp_path / "file").write_text("")
+    for out, expected in ((tmp_path, f"--out {tmp_path} is a folder"), (tmp_path / "file" / "x.gif", "cannot write")):
+        assert exit_code([str(runs["1"].parent), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and err.count("\n") == 1, err
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["file"]
+
+
 def test_hersd_render_needs_a_run_with_a_checkpoint(tmp_path, capsys):
     assert exit_code([str(tmp_path)]) == 2
     assert capsys.readouterr().err == f"hersd-render: error: {tmp_path}: not a run directory (no run.mcap)\n"

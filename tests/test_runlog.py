@@ -259,6 +259,18 @@ def test_old_format_logs_read_resume_and_convert_with_every_record_identical(tmp
     assert first.count("converted") == 2 and second.count("unchanged") == 3 and "converted" not in second
 
 
+def test_converting_what_is_no_folder_is_one_line_and_exit_2(tmp_path, capsys):
+    """A mistyped folder (or a log given as a folder) converts nothing: it says so, not a silent success."""
+    log = tmp_path / "run.mcap"
+    write_old_format(log, 2, complete=True)
+    for wrong in (tmp_path / "nowhere", log):
+        with pytest.raises(SystemExit) as stop:
+            convert_logs.main([str(tmp_path), str(wrong)])
+        assert stop.value.code == 2
+        assert capsys.readouterr().err == f"scripts/convert_logs.py: error: no folder {wrong}\n"
+    assert log.read_bytes() != rewritten(log)  # nothing converted before the refusal
+
+
 def test_a_resume_keeps_the_log_times_of_earlier_epochs(tmp_path):
     path = tmp_path / "run.mcap"
     writer = RunLogWriter(path, META)

@@ -154,6 +154,9 @@ def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
     replay = TrainConfig(schedule={"kind": "table", "from_run": str(tmp_path / "run")}, epochs=4).schedule
     assert list(replay.epoch_rates(4)) == pytest.approx([1.0, 1 - 0.5 * 0.9 * 0.0, 1 - 0.5 * 0.9 * 0.5, 1 - 0.5 * 0.9])
     assert replay.record()["from_run"] is None and replay.tag().startswith("table-")
+    kept = tmp_path / "run.mcap.orig"  # a log itself, under any name, as every reader of a run takes it
+    kept.write_bytes((tmp_path / "run" / "run.mcap").read_bytes())
+    assert TrainConfig(schedule={"kind": "table", "from_run": str(kept)}, epochs=4).schedule.record() == replay.record()
     with pytest.raises(ConfigError, match="^schedule.rates holds 3 rates but epochs=5"):
         TrainConfig(schedule={"kind": "table", "rates": [0.9, 0.8, 0.7]}, epochs=5)
     with pytest.raises(ConfigError, match="^schedule.from_run="):

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import ast
-import sys
 from dataclasses import fields
 from pathlib import Path
 
 import optuna
 import pytest
 from searches import fails_with, tiny_search
-from user_schedules import MODULE, SHARED_MODULE, write_module, write_shared_module
 
 from hersd.contract.compose import group_options
 from hersd.contract.schedules import Constant, Exponential, Linear
 from hersd.contract.schedules.base import HER_RATE
 from hersd.contract.study import PARAM_NAMES, REWARD_PARAM
-from sweeps.search.config import SpaceConfig, compose_search, space_bounds
+from sweeps.search.config import compose_search
+from sweeps.search.space import SpaceConfig
 from sweeps.search.plan import make_plan
 from sweeps.search.study import open_study
 
@@ -85,51 +84,6 @@ def test_kinds_of_enqueued_sets_are_inferred_when_several_kinds_are_searched(tmp
     study = open_study(plan, optuna.storages.InMemoryStorage())
     assert [t.system_attrs["fixed_params"] for t in study.trials] == [
         {"kind": "exponential", "beta1": 0.25, "beta2": 0.25}, {"kind": "linear", "beta1": 0.5}]
-
-
-@pytest.fixture
-def newcomer_modules(tmp_path, monkeypatch):
-    """tests/user_schedules.py's two modules importable in this process; forgotten afterwards."""
-    write_shared_module(write_module(tmp_path))
-    monkeypatch.syspath_prepend(str(tmp_path))
-    yield
-    for module in (MODULE, SHARED_MODULE):
-        sys.modules.pop(module, None)
-
-
-def _range(kind: str, name: str, *overrides: str) -> tuple[float, float]:
-    space = compose_search("default", [f"search.space.kinds=[{kind}]", *overrides]).space
-    bounds = space_bounds(space, kind, name)
-    return bounds.low, bounds.high
-
-
-def test_a_class_declaring_beta1_or_eps_itself_is_searched_over_its_declared_range(newcomer_modules) -> None:
-    assert _range(f"{SHARED_MODULE}.OwnEps", "eps") == (0.0, 1.0)  # not constant's search.space.eps
-    assert _range(f"{SHARED_MODULE}.HalfDrop", "beta1") == (0.0, 0.5)  # not refused for search.space.beta1
-    given = "search.space.ranges.beta1={low: 0.1, high: 0.2}"
-    assert _range(f"{SHARED_MODULE}.HalfDrop", "beta1", given) == (0.1, 0.2)
-    # the package's kinds, and a class inheriting their setting, keep search.space.<name>
-    assert _range(f"{SHARED_MODULE}.HerLike", "eps") == _range("constant", "eps") == (0.5, 1.0)
-    assert _range("exponential", "beta1", "search.space.beta1.high=0.5") == (0.0, 0.5)
-
-
-@pytest.mark.parametrize("kinds, message", [
-    (f"{MODULE}.KStep,{SHARED_MODULE}.ShortStep", f"search.space.kinds: {MODULE}.KStep and {SHARED_MODULE}.ShortStep "
-     "both search k0, over [1, 10000] and [1, 50]; give it one range, search.space.ranges.k0={low: ..., high: ...}"),
-    (f"exponential,{SHARED_MODULE}.HalfDrop", f"search.space.kinds: exponential and {SHARED_MODULE}.HalfDrop both "
-     "search beta1, over [0, 1] and [0, 0.5]; give it one range, search.space.ranges.beta1="),
-    (f"{MODULE}.KStep,{SHARED_MODULE}.WholeLow", f"search.space.kinds: {SHARED_MODULE}.WholeLow declares low a whole "
-     f"number and {MODULE}.KStep does not; rename it in one of the classes"),
-])
-def test_two_kinds_drawing_one_setting_two_ways_are_refused_at_start(newcomer_modules, kinds, message, tmp_path,
-                                                                     capsys) -> None:
-    assert message in fails_with([*tiny_search(tmp_path), f"search.space.kinds=[{kinds}]", "search.n_trials=1"], capsys)
-
-
-def test_two_kinds_given_one_range_of_a_setting_they_share_are_searched(newcomer_modules) -> None:
-    kinds = f"search.space.kinds=[{MODULE}.KStep,{SHARED_MODULE}.ShortStep]"
-    space = compose_search("default", [kinds, "search.space.ranges.k0={low: 1, high: 20}"]).space
-    assert {space_bounds(space, kind, "k0").high for kind in space.kinds} == {20}
 
 
 def test_the_search_parameter_names_are_typed_once() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -72,3 +73,12 @@ def test_a_dry_run_lists_each_run_with_its_state_and_the_pids_training(tmp_path)
     assert out[2].split()[:2] == ["running", str(runs[1])] and f"epoch 2 of 4, pid {os.getpid()}," in out[2]
     assert out[-2] == f"1 training now (pid {os.getpid()})"
     assert out[-1].startswith("to go: 1 run, 2 epochs, ~")  # the running run's 2 epochs left
+
+
+def test_a_dry_run_read_in_part_ends_quietly(tmp_path):
+    read, write = os.pipe()
+    os.close(read)  # as `| head` does once it has its lines
+    listed = subprocess.run([*SWEEP, "+grid=smoke", f"results_dir={tmp_path}", "--dry-run"], stdout=write,
+                            stderr=subprocess.PIPE, text=True)
+    os.close(write)
+    assert (listed.returncode, listed.stderr) == (-signal.SIGPIPE, "")

@@ -197,6 +197,8 @@ def test_a_locked_run_is_not_run_twice(tmp_path):
     ("task=custom", "task.env_id"),
     ("task.env_id=HandReach-v3", "task=custom"),
     ("task=cartpole", "task"),
+    ("task=null", "task=null is not a known task; choose one of: custom"),
+    ("learner=NULL", "learner=null is not a known learner; choose one of: ddpg"),
     ("algo.goal_strategy=nearest", "algo.goal_strategy"),
     ("schedule=sawtooth", "schedule"),
     ("schedule.kind=sawtooth", "schedule.kind"),
@@ -233,6 +235,18 @@ def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "results_dir" in err and len(err.strip().splitlines()) == 1
     assert blocker.read_text() == "not a folder"
+
+
+@pytest.mark.parametrize("inside", ["", "run"])
+def test_an_unusable_run_dir_is_one_line_naming_run_dir_with_exit_2(tmp_path, capsys, inside):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, f"run_dir={blocker / inside}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("hersd-train: error: run_dir: cannot write to "), err
+    assert err.endswith("pass run_dir=<a writable folder>") and blocker.read_text() == "not a folder"
 
 
 @pytest.mark.slow

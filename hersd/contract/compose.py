@@ -67,6 +67,8 @@ def compose(config_name: str | None, overrides: list[str], job_name: str, with_h
     ``with_hydra`` keeps the ``hydra`` node (launcher, sweeper)."""
     from hydra import compose as hydra_compose, initialize_config_module
 
+    if said := null_group(overrides):
+        raise ConfigError(said)
     with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3", job_name=job_name):
         return hydra_compose(config_name=config_name, overrides=overrides, return_hydra_config=with_hydra)
 
@@ -89,6 +91,17 @@ def group_options(group: str) -> list[str]:
 def group_choices(group: str) -> list[str]:
     """A group's choices on the command line: its configs, and for ``learner`` the learners of other packages."""
     return sorted({*group_options(group), *(entry_point_names() if group == "learner" else ())})
+
+
+def null_group(overrides: list[str]) -> str | None:
+    """The line refusing an override that sets a config group to null (``task=null``; Hydra's ValueError names
+    neither the group nor its choices), or None."""
+    for override in overrides:
+        key, _, value = override.partition("=")
+        group = key.lstrip("+")
+        if value.strip().lower() == "null" and group_options(group):
+            return f"{group}=null is not a known {group}; choose one of: {', '.join(group_choices(group))}"
+    return None
 
 
 def explain_config_error(err: Exception, what: str = "config field", see: str = "hersd-train --help") -> str:

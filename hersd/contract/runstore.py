@@ -184,13 +184,13 @@ def keep_aside(path: Path, why: str) -> Path:
     return kept
 
 
-def check_writable(directory: Path) -> None:
-    """Fail early (ConfigError) if ``directory`` cannot be created or written."""
+def check_writable(directory: Path, key: str = "results_dir") -> None:
+    """Fail early (ConfigError naming the setting ``key``) if ``directory`` cannot be created or written."""
     try:
         directory.mkdir(parents=True, exist_ok=True)
         probe = directory / f".write-test-{os.getpid()}"
         probe.touch()
         probe.unlink()
     except OSError as err:
-        raise ConfigError(f"results_dir: cannot write to {directory} ({err.strerror}); "
-                          f"pass results_dir=<a writable folder>") from None
+        raise ConfigError(f"{key}: cannot write to {directory} ({err.strerror}); "
+                          f"pass {key}=<a writable folder>") from None

@@ -184,7 +184,10 @@ def main(argv: list[str] | None = None) -> None:
         return
     try:
         cfg = compose_train(argv)
-        check_writable(run_dir(cfg).parent if cfg.run_dir is not None else Path(cfg.results_dir))
+        if cfg.run_dir is None:
+            check_writable(Path(cfg.results_dir))
+        else:
+            check_writable(Path(cfg.run_dir), "run_dir")
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:

@@ -284,6 +284,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be at least 1, got {args.episodes}")
+    if args.out is not None and args.out.is_dir():
+        parser.error(f"--out {args.out} is a folder; give the GIF's file name")
     try:
         cfg, checkpoint = load_run(args.run_dir, args.epoch)
         agent = policy_from_checkpoint(cfg, checkpoint)
@@ -297,6 +299,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RenderError as err:
         print(f"hersd-render: error: {err}", file=sys.stderr)
         return 1
+    except OSError as err:  # the GIF's folder or file cannot be written
+        print(f"hersd-render: error: cannot write {err.filename}: {err.strerror}", file=sys.stderr)
+        return 2
     outcomes = ", ".join("success" if success else "failure" for success in animation.successes)
     print(f"{animation.path} (epoch {epoch}, {animation.frames} frames, {animation.path.stat().st_size // 1024} KB, "
           f"{animation.seconds:.1f} s; episodes: {outcomes})")

@@ -27,7 +27,7 @@ from hersd.contract.runlog import read_records
 from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
 from hersd.contract.study import (KIND_ATTR, REWARD_PARAM, RUN_DIRS_ATTR, kind_params, mean_rates, one_line, param_overrides,
                                   trial_config)
-from sweeps.search.config import SpaceConfig, space_bounds, whole_number
+from sweeps.search.space import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
 from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR
 

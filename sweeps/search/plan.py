@@ -22,7 +22,8 @@ from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
 from hersd.contract.study import REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
 from sweeps.search.storage import resolve_storage
-from sweeps.search.config import SearchConfig, enqueued_kind, space_bounds, space_record
+from sweeps.search.config import SearchConfig, enqueued_kind
+from sweeps.search.space import space_bounds, space_record
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every
 # run of every trial would share one directory.

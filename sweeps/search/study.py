@@ -18,13 +18,14 @@ from optuna.trial import FrozenTrial, TrialState
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
-from sweeps.search.config import SamplerConfig, enqueued_params, space_record
+from sweeps.search.config import SamplerConfig, enqueued_params
+from sweeps.search.space import space_record
 from sweeps.search.plan import SearchPlan
 
 FINISHED_STATES = (TrialState.COMPLETE, TrialState.PRUNED)  # what search.n_trials counts, less skipped trials
 SKIPPED_ATTR = "skipped"  # trial: pruned unrun, because another worker held its run (the same parameters): why
 ERROR_ATTR = "error"  # trial: the exception that failed it, on one line (the command names the first)
-SPACE_ATTR = "space"  # study: what it draws (sweeps.search.config.space_record), set when it is created
+SPACE_ATTR = "space"  # study: what it draws (sweeps.search.space.space_record), set when it is created
 
 
 class TrialSeededTPE(optuna.samplers.TPESampler):

@@ -83,11 +83,11 @@ def read_rates_file(path: Path) -> list:
 
 
 def read_run_rates(folder: Path) -> list:
-    """The relabel_rate a run's log recorded each epoch, shape (epochs done,)."""
-    from hersd.contract.runlog import LOG_NAME, RunLogError, read_records
+    """The relabel_rate a run's log (``folder``: the run's folder or the log itself) recorded each epoch, shape
+    (epochs done,)."""
+    from hersd.contract.runlog import RunLogError, read_records
 
-    log = folder if folder.suffix == ".mcap" else folder / LOG_NAME
     try:
-        return [record["relabel_rate"] for record in read_records(log).records]
+        return [record["relabel_rate"] for record in read_records(folder).records]
     except (OSError, RunLogError, KeyError) as err:
         raise ConfigError(f"schedule.from_run={folder}: cannot read its rates ({' '.join(str(err).split())})") from None

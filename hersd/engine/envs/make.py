@@ -62,15 +62,16 @@ def make_env(task: TaskConfig, **make_kwargs: Any) -> Any:
     or a distance_threshold for an env without one (the mazes' radius is fixed) raises
     ConfigError (one line)."""
     try:
-        env = gym.make(task.env_id, **make_kwargs).unwrapped
+        made = gym.make(task.env_id, **make_kwargs)
     except gym.error.Error as err:
         raise ConfigError(f"task.env_id={task.env_id!r}: {' '.join(str(err).split())[:200]}; goal-conditioned envs "
                           f"include: {', '.join(goal_env_ids()[:12])}, ...") from None
+    env = made.unwrapped
     if not is_goal_env(env):
         env.close()
         raise ConfigError(f"task.env_id={task.env_id!r} is not goal-conditioned (needs a dict observation with "
                           f"{', '.join(GOAL_KEYS)} and compute_reward); e.g. {', '.join(goal_env_ids()[:6])}")
-    env.max_episode_steps = gym.spec(task.env_id).max_episode_steps
+    env.max_episode_steps = made.spec.max_episode_steps  # the id made: also an unversioned or module:id one
     if env.max_episode_steps is None:
         env.close()
         raise ConfigError(f"task.env_id={task.env_id!r} is registered without max_episode_steps: hersd runs episodes "
