@@ -118,7 +118,7 @@ def _read_database(location: str, name: str) -> StudyStorage:
         with engine.connect() as connection:
             is_optuna = sqlalchemy.inspect(connection).has_table("studies")
     except SQLAlchemyError as err:
-        raise StudyStorageError(f"cannot reach the database at {name} "
+        raise StudyStorageError(f"{name}: cannot reach the database "
                                 f"({one_line(getattr(err, 'orig', None) or err)})") from None
     finally:
         engine.dispose()

@@ -87,7 +87,7 @@ def main() -> None:
     default_log = next(iter(sorted((REPOSITORY / "results").rglob("run.mcap"))), None)
     parser.add_argument("--log", type=Path, default=default_log, help="a 200-epoch run.mcap to replay")
     parser.add_argument("--dir", type=Path, default=None, help="folder to write in (default: a temporary one)")
-    parser.add_argument("--repeats", type=int, default=3, help="runs of each writer; the fastest epoch-wise median")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each writer; each epoch's time is the median over them")
     args = parser.parse_args()
     meta, records = records_of(args.log)
     folder = Path(tempfile.mkdtemp(prefix="bench_runlog-", dir=args.dir))

@@ -188,6 +188,17 @@ def test_storages_in_the_search_folder_are_found_and_a_bad_one_is_skipped(storag
     assert "study storage" in (tmp_path / "out" / "index.html").read_text(encoding="utf-8")
 
 
+def test_a_found_file_that_is_no_database_is_skipped_naming_it_first(tmp_path, capsys):
+    # docs/ANALYSIS.md: "warning: skipped study storage <path>: <reason>", also for a file SQLite cannot open
+    write_run(tmp_path / "run", make_config(), np.linspace(0, 1, 6))
+    (tmp_path / "search").mkdir()
+    junk = tmp_path / "search" / "junk.db"
+    junk.write_text("not a database")
+    assert report_main([str(tmp_path), "--out", str(tmp_path / "out")]) == 0
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"warning: skipped study storage {junk}: "), line
+
+
 def test_the_run_list_says_each_state_in_words():
     assert run_state_words(complete=True, damaged=False, done=200, total=200) == "complete"
     assert run_state_words(complete=False, damaged=False, done=39, total=200) == "in progress (epoch 39 of 200)"

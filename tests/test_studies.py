@@ -39,7 +39,7 @@ def test_an_unreachable_database_is_one_line_without_its_password(hand_sized, tm
     assert report_main([str(hand_sized), "--out", str(tmp_path), "--storage", url]) == 2  # nothing listens on port 1
     err = capsys.readouterr().err
     shown = url.replace("secret", "***")
-    assert err.count("\n") == 1 and f"cannot reach the database at {shown} (connection to server" in err, err
+    assert err.count("\n") == 1 and f"--storage {shown}: cannot reach the database (connection to server" in err, err
     assert "secret" not in err
 
 
