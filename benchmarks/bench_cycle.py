@@ -39,7 +39,7 @@ from torch import nn
 from hersd.contract.compose import compose_train
 from hersd.contract.config import DDPGConfig
 from hersd.contract.tasks import TASKS
-from hersd.engine.learners.base import cpu_has_bf16
+from hersd.engine.resources import cpu_has_bf16
 from hersd.contract.cores import available_cores
 from hersd.engine.run_state import RunState
 from hersd.engine.train import EpochStats, collect, update

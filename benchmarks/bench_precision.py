@@ -23,7 +23,8 @@ import torch
 
 from hersd.contract.config import DDPGConfig
 from hersd.engine.envs.make import EnvSpec
-from hersd.engine.learners.base import FullPrecisionLinear, cpu_has_bf16, mlp
+from hersd.engine.learners.base import FullPrecisionLinear, mlp
+from hersd.engine.resources import cpu_has_bf16
 from hersd.engine.learners.ddpg import DDPG
 from hersd.engine.replay.buffer import TransitionBatch
 

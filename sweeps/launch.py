@@ -79,8 +79,11 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
           f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
+    at_once = concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"])
+    if at_once is not None:  # they train here: refuse now what this machine cannot run, not in each job
+        check_machine_here({run.machine for directory, run in planned.items() if states[directory] != "complete"})
     if sweeper.dry_run:
-        list_runs(planned, concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"]))
+        list_runs(planned, at_once)
         return []
 
     to_launch = [run.job for directory, run in planned.items() if states[directory] != "complete"]
@@ -115,6 +118,18 @@ def list_runs(planned: dict, at_once: int | None) -> None:
         print(f"{len(holders)} training now (pid {', '.join(holders)})")
     if (left := time_to_go(statuses, at_once)) is not None:
         print(left)
+
+
+def check_machine_here(machines: set[tuple[str, str]]) -> None:
+    """SweepError (exit 2) if this machine cannot train a run of one of these (device, precision) pairs,
+    e.g. ``precision=bf16`` on a CPU without bf16 instructions (:func:`hersd.engine.resources.check_machine`)."""
+    from hersd.engine.resources import check_machine  # torch: only for a sweep that trains here
+
+    for device, precision in sorted(machines):
+        try:
+            check_machine(device, precision)
+        except ConfigError as err:
+            raise SweepError(str(err), exit_code=2) from None
 
 
 def check_launcher(launcher: DictConfig) -> None:

@@ -67,6 +67,7 @@ class SweepError(RuntimeError):
 class PlannedRun:
     job: list[str]  # the run's overrides: ``hersd-sweep <job>`` is the one-run sweep of it
     epochs: int
+    machine: tuple[str, str]  # (device, precision): what it asks of the machine that trains it
 
 
 def register_schemas() -> None:
@@ -203,7 +204,8 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
             if train_cfg.run_dir is not None and len(jobs) > 1:  # each run would be planned into the first's folder
                 raise SweepError(f"run_dir={train_cfg.run_dir} would put the sweep's {len(jobs)} runs in one folder; "
                                  "leave it out: each run gets its own under results_dir", exit_code=2)
-            planned.setdefault(run_dir(train_cfg), PlannedRun(job, train_cfg.epochs))
+            planned.setdefault(run_dir(train_cfg),
+                               PlannedRun(job, train_cfg.epochs, (train_cfg.device, train_cfg.precision)))
         except (ConfigError, HydraException, OmegaConfBaseException) as err:  # e.g. a swept value no config names
             said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
             raise SweepError(f"run [{' '.join(job)}]: {said}", exit_code=2) from None

@@ -12,7 +12,7 @@ import torch
 from helpers import GOAL, OBS, batch, tiny_spec
 from torch import nn
 
-import hersd.engine.learners.base as base
+import hersd.engine.resources as resources
 from hersd.contract.compose import compose_train
 from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig, config_record
 from hersd.contract.errors import ConfigError
@@ -29,7 +29,7 @@ LEARNERS = ("ddpg", "td3", "sac")
 @pytest.fixture
 def bf16_cpu(monkeypatch):
     """Whatever this CPU lists, let bf16 through (torch emulates it where it has no instructions)."""
-    monkeypatch.setattr(base, "cpu_has_bf16", lambda: True)
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)
 
 
 def learner(name: str, precision: str):
@@ -96,7 +96,7 @@ def test_fp32_checkpoints_load_into_a_bf16_learner(bf16_cpu):
 
 
 def test_a_cpu_without_bf16_instructions_refuses_bf16_in_one_line(monkeypatch):
-    monkeypatch.setattr(base, "cpu_has_bf16", lambda: False)
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
     with pytest.raises(ConfigError, match="no bf16 instructions.*use precision=fp32"):
         learner("ddpg", "bf16")
     learner("ddpg", "fp32")
@@ -116,7 +116,7 @@ def test_bf16_is_another_runs_identity_and_fp32_that_of_runs_made_before_the_set
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not base.cpu_has_bf16(), reason="this CPU has no bf16 instructions: hersd refuses bf16 here")
+@pytest.mark.skipif(not resources.cpu_has_bf16(), reason="this CPU has no bf16 instructions: hersd refuses bf16 here")
 def test_bf16_ddpg_learns_fetch_reach(tmp_path):
     """Paper settings on FetchReach, seed 0, precision=bf16: test success >= 0.9 within 5 epochs, as fp32
     (docs/LEARNERS.md, "Precision", gives both runs epoch by epoch)."""
@@ -130,8 +130,8 @@ def test_a_bf16_runs_policy_renders_on_a_cpu_without_bf16_instructions(monkeypat
     from hersd.engine.render import policy_from_checkpoint
 
     cfg = compose_train(["task=reach", "precision=bf16"])
-    monkeypatch.setattr(base, "cpu_has_bf16", lambda: True)
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)
     trained = learner_class("ddpg").build(cfg, *run_sizes(cfg), torch.device("cpu"))
-    monkeypatch.setattr(base, "cpu_has_bf16", lambda: False)
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
     agent = policy_from_checkpoint(cfg, {"agent": trained.state_dict()})
     assert all(torch.equal(p, q) for p, q in zip(agent.actor.parameters(), trained.actor.parameters()))

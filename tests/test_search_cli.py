@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from helpers import run_command
-from searches import FINISHED, load, run_meta, tiny_search
+from searches import FINISHED, fails_with, load, run_meta, tiny_search
 
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import read_run
@@ -69,3 +69,14 @@ def test_the_report_command_names_only_the_storages_the_report_would_not_find(tm
     assert cli.report_command(tmp_path, elsewhere) == shlex.join(["hersd-report", str(tmp_path), "--storage", elsewhere])
     assert shlex.split(cli.report_command(tmp_path, "postgresql://u:secret@host/db"))[2:] == [
         "--storage", "postgresql://u:***@host/db"]
+
+
+def test_a_search_training_here_refuses_bf16_on_a_cpu_without_it_before_any_trial(tmp_path: Path, capsys,
+                                                                                   monkeypatch) -> None:
+    from hersd.engine import resources
+
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
+    err = fails_with([*tiny_search(tmp_path), "precision=bf16"], capsys)
+    assert err == ("hersd-search: error: precision=bf16: this CPU has no bf16 instructions (avx512_bf16, amx_bf16); "
+                   "use precision=fp32\n")
+    assert not (tmp_path / "search").exists()  # no study made, no trial failed

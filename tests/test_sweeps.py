@@ -109,6 +109,36 @@ def test_no_runs_at_once_is_one_line_saying_what_to_do_and_exit_2(tmp_path, n_jo
     assert not any(tmp_path.iterdir())
 
 
+def test_a_run_this_machine_cannot_train_is_refused_before_any_run_unless_the_runs_train_elsewhere(tmp_path):
+    """A sweep training here checks what its runs ask of the machine first (one line, exit 2, dry run too);
+    one whose jobs run on a cluster's nodes lists them: the nodes decide."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a CUDA device")
+    for dry_run in (["--dry-run"], []):
+        result = sweep("+grid=smoke", "device=cuda", f"results_dir={tmp_path}", *dry_run, check=False)
+        assert result.returncode == 2 and result.stderr == ("hersd-sweep: error: device=cuda: torch sees no CUDA "
+                                                            "device here; use device=cpu or device=auto\n")
+        assert not any(tmp_path.iterdir())
+    listed = sweep("+grid=smoke", "device=cuda", "hydra/launcher=slurm", f"results_dir={tmp_path}", "--dry-run")
+    assert len(listed_runs(listed.stdout)) == 4
+
+
+def test_bf16_is_refused_on_a_cpu_without_its_instructions_before_any_run(monkeypatch):
+    from hersd.engine import resources
+    from sweeps.launch import check_machine_here
+    from sweeps.plan import SweepError
+
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
+    check_machine_here({("cpu", "fp32")})
+    with pytest.raises(SweepError, match="precision=bf16: this CPU has no bf16 instructions") as refused:
+        check_machine_here({("cpu", "fp32"), ("cpu", "bf16")})
+    assert refused.value.exit_code == 2
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)
+    check_machine_here({("cpu", "fp32"), ("cpu", "bf16")})
+
+
 def test_a_joblib_launcher_of_ones_own_without_n_jobs_is_told_what_to_set():
     """The joblib plugin's default n_jobs, -1, is refused with the setting that gives one run per core."""
     from hydra_plugins.hydra_joblib_launcher.config import JobLibLauncherConf

@@ -192,11 +192,11 @@ def main(argv: list[str] | None = None) -> None:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
         _fail(explain_config_error(err))
-    from hersd.engine.resources import resolve_device  # torch and MuJoCo load only once the input is valid
+    from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
     from hersd.engine.train import NonFiniteLossError, RunStateError, train
 
     try:
-        resolve_device(cfg.device)
+        check_machine(cfg.device, cfg.precision)
         log_path = train(cfg, command=" ".join(["hersd-train", *argv]))
     except ConfigError as err:
         _fail(str(err))

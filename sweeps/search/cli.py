@@ -20,6 +20,7 @@ from optuna.storages import BaseStorage
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.study import found_by_report, shown, storage_file
+from hersd.engine.resources import check_machine
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
@@ -76,6 +77,8 @@ def start(argv: list[str]) -> tuple[SearchPlan, BaseStorage, optuna.Study]:
     plan = make_plan(compose_search(search_name, search_overrides), train_overrides, search_name)
     if plan.search.launcher == "slurm":
         check_slurm(plan.search.slurm)
+    else:  # its runs train here: refuse now what this machine cannot run, before any trial is made
+        check_machine(plan.base.device, plan.base.precision)
     storage = open_storage(plan.storage)
     return plan, storage, open_study(plan, storage)
 

@@ -34,7 +34,6 @@ import dataclasses
 import importlib
 from functools import reduce
 from importlib.metadata import entry_points
-from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, NamedTuple, Optional
 
 import numpy as np
@@ -45,12 +44,12 @@ from hersd.contract import learner_registry as registry
 from hersd.contract.config import DDPGConfig, TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.engine.replay.buffer import TransitionBatch
+from hersd.engine.resources import check_precision
 
 if TYPE_CHECKING:
     from hersd.engine.envs.make import EnvSpec
 
 TWIN_CRITICS = ("critic", "critic2")  # TD3's and SAC's critics: the target takes their minimum
-BF16_CPU_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")  # /proc/cpuinfo flags of bf16 instructions (x86; Arm's bf16)
 
 
 def learner_class(name: str) -> type["GoalConditionedLearner"]:
@@ -113,24 +112,6 @@ def mlp(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int,
         in_dim = hidden_units
     layers.append(output_layer(in_dim, out_dim))
     return nn.Sequential(*layers)
-
-
-def cpu_has_bf16() -> bool:
-    """Whether this CPU lists bf16 instructions in /proc/cpuinfo (False where there is none)."""
-    cpuinfo = Path("/proc/cpuinfo")
-    if not cpuinfo.exists():
-        return False
-    flags = {flag for line in cpuinfo.read_text().splitlines()
-             if line.startswith(("flags", "Features")) for flag in line.split(":", 1)[1].split()}
-    return any(flag in flags for flag in BF16_CPU_FLAGS)
-
-
-def check_precision(precision: str, device: torch.device) -> None:
-    """ConfigError for precision=bf16 on a CPU without bf16 instructions: emulated, it is slower than
-    fp32, and running fp32 instead would file fp32 results under a bf16 run's identity."""
-    if precision == "bf16" and device.type == "cpu" and not cpu_has_bf16():
-        raise ConfigError("precision=bf16: this CPU has no bf16 instructions (avx512_bf16, amx_bf16); "
-                          "use precision=fp32")
 
 
 def mlp_parameters(in_dim: int, out_dim: int, hidden_layers: int, hidden_units: int) -> int:
@@ -215,7 +196,7 @@ class GoalConditionedLearner:
         return 4 * (4 * sum(sizes.values()) + sum(sizes[name] for name in cls.TARGETS))
 
     def __init__(self, cfg: DDPGConfig, spec: "EnvSpec", gamma: float, device: torch.device, precision: str = "fp32"):
-        check_precision(precision, device)
+        check_precision(precision, device.type)
         self.cfg, self.max_action, self.gamma, self.device = cfg, spec.max_action, gamma, device
         self.precision = precision
         self.obs_norm = RunningNormalizer(spec.obs_dim, cfg.norm_eps, cfg.clip_norm, device)
