@@ -32,7 +32,7 @@ import yaml
 
 from analysis.provenance import session_rows, session_table
 from analysis.workers import ForkedMap
-from hersd.contract.config import PAPER_LEARNER, AlgoConfig, TrainConfig
+from hersd.contract.config import PAPER_LEARNER, AlgoConfig, TrainConfig, learner_node
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
 from hersd.contract.runstore import HASHED_UNLESS, run_identity
@@ -195,9 +195,11 @@ def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def configuration(config: dict[str, Any]) -> dict[str, Any]:
-    """The dotted settings that make a run's configuration: its identity (as the run store hashes it)
-    less the seed, with the fields the identity leaves out at their earlier value shown at that value."""
+    """The dotted settings that make a run's configuration, as one types them: its identity (as the run store
+    hashes it) less the seed, with the fields the identity leaves out at their earlier value shown at that value."""
     identity = {key: value for key, value in run_identity(config).items() if key != "seed"}
+    if isinstance(identity.get("learner"), dict):  # a class's settings by the key one types: learner.td3late.*
+        identity["learner"] = learner_node(identity["learner"])
     return {**HASHED_UNLESS, **_flatten(identity)}
 
 

@@ -28,7 +28,7 @@ from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import available_cores, resolve_threads
 from hersd.contract.runstore import RunFolder, RunLockedError, check_writable, run_dir
 from sweeps.hydra_private import job_error
-from sweeps.plan import SweepError, job_train_config, plan_runs, register_schemas
+from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas
 from sweeps.status import run_status, time_to_go
 
 PROGRESS_NAME = "progress.jsonl"
@@ -69,10 +69,11 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     global _composed
     _composed = True
     os.environ["HYDRA_FULL_ERROR"] = _hydra_full_error  # composed: Hydra reports the rest as the user set it
-    try:  # the sweep's own settings (e.g. seeds >= 1), before the grid expands them
-        sweep_threads = job_train_config(sweeper.config).threads
-    except ConfigError as err:
+    try:  # the sweep's own setting, before the grid expands it; plan_runs checks every run's config (not the
+        SweepConfig.check_seeds(sweeper.config.seeds)  # grid's base: schedule=linear,exponential schedule.beta1=0.3
+    except ConfigError as err:                         # is valid, though the base's constant has no beta1)
         raise SweepError(str(err), exit_code=2) from None
+    sweep_threads = sweeper.config.threads
     check_launcher(sweeper.config.hydra.launcher)
     planned = plan_runs(sweeper, arguments)
     states = {directory: RunFolder(directory).state() for directory in planned}

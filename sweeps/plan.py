@@ -50,8 +50,13 @@ class SweepConfig(TrainConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.seeds < 1:
-            raise ConfigError(f"seeds must be >= 1, got {self.seeds}")
+        self.check_seeds(self.seeds)
+
+    @staticmethod
+    def check_seeds(seeds: int) -> None:
+        """ConfigError unless ``seeds`` >= 1: the sweep's own setting, which no run of it holds."""
+        if seeds < 1:
+            raise ConfigError(f"seeds must be >= 1, got {seeds}")
 
 
 class SweepError(RuntimeError):

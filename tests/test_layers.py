@@ -2,7 +2,8 @@
 <- sweeps (many runs); hersd/contract <- analysis (logs to figures); sweeps and analysis never meet. Every import
 counts: at module level, inside a function, under ``if TYPE_CHECKING:``, relative ones. No module imports a layer
 it may not, or a module by its path from before the split (hersd/__init__.py's MOVED: those are for users), runs
-one (``python -m``, a subprocess, ``importlib``: any string naming its modules), and no import chain is circular."""
+one (``python -m``, a subprocess, ``runpy``, ``importlib``, ``exec``: any string, or ``+`` of strings, naming its
+modules), and no import chain is circular."""
 
 from __future__ import annotations
 
@@ -93,21 +94,31 @@ def test_no_module_imports_a_layer_it_may_not_or_an_old_path():
 
 
 def named_modules(text: str) -> set[str]:
-    """The modules a string names: ``"analysis.report"``, ``"analysis.report:main"``, ``"-m analysis"``, and
-    ``f"analysis.{name}"``'s ``"analysis."``."""
+    """The modules a string names: ``"analysis.report"``, ``"analysis.report:main"``, ``"-m analysis"``,
+    ``f"analysis.{name}"``'s ``"analysis."``, and code for ``exec``: ``"import analysis"``, ``"from analysis import x"``."""
     whole = re.fullmatch(r"(\w+(?:\.\w+)*)\.?(:\w+)?", text)
-    return ({whole.group(1)} if whole else set()) | set(re.findall(r"-m\s+([\w.]+)", text))
+    return ({whole.group(1)} if whole else set()) | set(re.findall(r"(?:-m|\bimport|\bfrom)\s+([\w.]+)", text))
+
+
+def joined(node: ast.AST) -> str | None:
+    """The string a ``+`` of string constants spells (``"hersd." + "engine.train"``), else None."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return node.value
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add):
+        left, right = joined(node.left), joined(node.right)
+        return None if left is None or right is None else left + right
+    return None
 
 
 SCRIPTS = {name: target.partition(":")[0] for name, target in  # console script -> its module
            tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["scripts"].items()}
-RUNNING_MODULES = ("subprocess", "os")
-RUNNERS = {"run", "Popen", "call", "check_call", "check_output", "system", "popen"}  # theirs, imported by name
+RUNNING_MODULES = ("subprocess", "os", "runpy")
+RUNNERS = {"run", "Popen", "call", "check_call", "check_output", "system", "popen", "run_path"}  # theirs, imported by name
 
 
 def run_modules(call: ast.Call) -> set[str]:
-    """The modules a call of subprocess or os (or of a subprocess function imported by name) runs by a console
-    script or a file's path: ``["hersd-report", folder]``, ``"python analysis/report.py"``."""
+    """The modules a call of subprocess, os or runpy (or of their functions imported by name) runs by a console
+    script or a file's path: ``["hersd-report", folder]``, ``"python analysis/report.py"``, ``run_path("x/y.py")``."""
     func = call.func
     of_module = isinstance(func, ast.Attribute) and isinstance(func.value, ast.Name) and func.value.id in RUNNING_MODULES
     if not (of_module or isinstance(func, ast.Name) and func.id in RUNNERS):
@@ -131,8 +142,8 @@ def test_no_module_runs_a_layer_it_may_not_import():
         for node in ast.walk(tree):
             if isinstance(node, ast.Call):
                 names = {name: f"runs {name}" for name in run_modules(node)}
-            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-                names = {name: f"names {node.value!r}" for name in named_modules(node.value)}
+            elif (text := joined(node)) is not None and id(node) not in docstrings:
+                names = {name: f"names {text!r}" for name in named_modules(text)}
             else:
                 continue
             for name, what in names.items():

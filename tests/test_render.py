@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import TINY, metrics
+from helpers import TINY, command, metrics
 from PIL import Image, ImageSequence
+from user_learners import LATE
 
 import hersd.engine.render
 import hersd.engine.train
@@ -61,6 +62,17 @@ def test_hersd_render_draws_the_checkpoints_epoch_as_training_did(runs, tmp_path
     assert main([str(directory), "--epoch", "2", "--out", str(out)]) == 0
     assert out.read_bytes() == RunFolder(directory).animation(2).read_bytes()
     assert f"{out} (epoch 2, 52 frames" in capsys.readouterr().out
+
+
+def test_hersd_render_draws_a_run_of_an_outside_learner_with_settings_of_its_own(tmp_path):
+    """Its log records the settings under the class path; the run is configured by ``learner.td3late.*``."""
+    (tmp_path / "user_late.py").write_text(LATE)
+    trained = command("hersd.engine.cli:main", [*RUN, "epochs=1", "keep_checkpoint=true", f"results_dir={tmp_path}",
+                                                 "learner._target_=user_late.TD3Late", "learner.td3late.actor_start=2"],
+                      tmp_path)
+    directory = Path(trained.stdout.strip().splitlines()[-1]).parent
+    drawn = command("hersd.engine.render:main", [str(directory), "--out", str(tmp_path / "late.gif")], tmp_path)
+    assert f"{tmp_path / 'late.gif'} (epoch 1, 52 frames" in drawn.stdout
 
 
 def exit_code(args: list[str]) -> int:

@@ -45,6 +45,8 @@ def test_a_class_declaring_beta1_or_eps_itself_is_searched_over_its_declared_ran
      "search beta1, over [0, 1] and [0, 0.5]; give it one range, search.space.ranges.beta1="),
     (f"{MODULE}.KStep,{SHARED_MODULE}.WholeLow", f"search.space.kinds: {SHARED_MODULE}.WholeLow declares low a whole "
      f"number and {MODULE}.KStep does not; rename it in one of the classes"),
+    (f"{SHARED_MODULE}.LambdaLow", f"search.space.kinds: {SHARED_MODULE}.LambdaLow searches a setting named lambda_h, "
+     "the name a trial gives ARCHER's reward weight algo.lambda_h; rename the setting in the class"),
 ])
 def test_two_kinds_drawing_one_setting_two_ways_are_refused_at_start(newcomer_modules, kinds, message, tmp_path,
                                                                      capsys) -> None:

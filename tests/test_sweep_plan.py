@@ -89,8 +89,8 @@ def test_the_decay_or_mean_campaign_finishes_the_exponential_then_takes_turns_wi
 
 
 def test_the_bf16_campaign_trains_her_seeds_0_to_4_in_folders_apart_from_the_committed_fp32_ones(tmp_path):
-    runs = [Path(directory).relative_to(tmp_path) for _, directory in
-            listed("+grid=bf16_push", f"results_dir={tmp_path}")]
+    runs = [Path(directory).relative_to(tmp_path) for _, directory in  # runs on SLURM's nodes: any CPU may plan them
+            listed("+grid=bf16_push", "hydra/launcher=slurm", f"results_dir={tmp_path}")]
     assert [(run.parent, run.name.split("-")[0]) for run in runs] == \
         [(Path("push/her/constant-0.8"), f"seed{seed}") for seed in range(5)]
     fp32 = {path.name for path in (RESULTS / "push/her/constant-0.8").iterdir()}

@@ -76,6 +76,8 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
     (["+grid=smoke", "no_such_key=1"], "no_such_key is not a sweep setting; see hersd-sweep --help"),
     (["+grid=smoke", "seed=a"], "seed: Value 'a' of type 'str' could not be converted to Integer"),
     (["+grid=smoke", "seeds=0"], "seeds must be >= 1, got 0"),
+    (["schedule=linear,exponential", "schedule.beta1=3"],
+     "run [seed=0 schedule=linear schedule.beta1=3 RESULTS]: schedule.beta1 must be a number in [0, 1], got 3"),
 ])
 def test_bad_input_is_one_line_naming_the_choices_and_exit_2(tmp_path, args, expected):
     result = sweep(*args, "--dry-run", f"results_dir={tmp_path}", check=False)
@@ -83,6 +85,13 @@ def test_bad_input_is_one_line_naming_the_choices_and_exit_2(tmp_path, args, exp
     assert result.stderr.startswith("hersd-sweep: error: ")
     assert expected.replace("RESULTS", f"results_dir={tmp_path}") in result.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_a_setting_fixed_for_every_swept_schedule_is_checked_on_each_not_on_the_default(tmp_path):
+    """The grid's base (HER's constant schedule) has no beta1; the runs, linear and exponential, have."""
+    result = sweep("schedule=linear,exponential", "schedule.beta1=0.3", "seeds=1", "--dry-run", f"results_dir={tmp_path}")
+    assert [Path(run).parent.name for run in listed_runs(result.stdout)] == ["linear-b1_0.3",
+                                                                              "exponential-b1_0.3-b2_0.25"]
 
 
 def test_an_unwritable_results_dir_is_one_line_and_exit_2_before_any_run(tmp_path):
@@ -137,6 +146,14 @@ def test_bf16_is_refused_on_a_cpu_without_its_instructions_before_any_run(monkey
     assert refused.value.exit_code == 2
     monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)
     check_machine_here({("cpu", "fp32"), ("cpu", "bf16")})
+
+
+def test_checking_runs_that_need_nothing_of_the_machine_loads_no_torch():
+    """fp32 on the CPU (or ``auto``, which falls back to it) cannot be refused: the dry run stays light."""
+    code = ("import sys; from sweeps.launch import check_machine_here; "
+            "check_machine_here({('auto', 'fp32'), ('cpu', 'fp32')}); print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "False"
 
 
 def test_a_joblib_launcher_of_ones_own_without_n_jobs_is_told_what_to_set():

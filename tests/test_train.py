@@ -200,7 +200,9 @@ def test_a_locked_run_is_not_run_twice(tmp_path):
     ("task=null", "task=null is not a known task; choose one of: custom"),
     ("learner=NULL", "learner=null is not a known learner; choose one of: ddpg"),
     ("algo.goal_strategy=nearest", "algo.goal_strategy"),
-    ("schedule=sawtooth", "schedule"),
+    ("schedule=sawtooth", "table, or a class of your own: schedule._target_=<module>.<Class>"),
+    ("schedule=my_pkg.steps.Step", "names a class, which no config of the schedule group holds; type "
+                                   "schedule._target_=my_pkg.steps.Step"),
     ("schedule.kind=sawtooth", "schedule.kind"),
     ("schedule._target_=no_such_module.Step", "no_such_module.Step"),
     ("schedule=constant schedule.beta1=0.5", "schedule.beta1"),  # not a setting of constant

@@ -10,39 +10,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 from helpers import TINY, command
+from user_learners import LATE
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_run
-
-# A user's module: TD3 whose actor waits ``actor_start`` updates, its settings TD3's and that one.
-LATE = '''
-from dataclasses import dataclass
-
-from hersd.contract.config import TD3Config
-from hersd.contract.errors import ConfigError
-from hersd.engine.learners.td3 import TD3
-
-
-@dataclass
-class LateSettings(TD3Config):
-    actor_start: int = 4  # the actor steps only after this many updates
-
-    def __post_init__(self):
-        super().__post_init__()
-        if self.actor_start < 0:
-            raise ConfigError(f"learner.td3late.actor_start must be >= 0, got {self.actor_start}")
-
-
-class TD3Late(TD3):
-    SETTINGS = LateSettings
-
-    def actor_step_due(self):
-        return super().actor_step_due() and self.update_count > self.td3.actor_start
-
-
-class RegisteredLate(TD3Late):
-    NAME = "late"
-'''
 
 
 def test_a_learner_outside_the_package_trains_sweeps_and_is_reported(tmp_path):
@@ -63,6 +34,8 @@ def test_a_learner_outside_the_package_trains_sweeps_and_is_reported(tmp_path):
     runs = pd.read_csv(results / "report" / "tables" / "runs.csv")
     assert list(runs["learner"]) == ["user_late.TD3Late"] * 2 and runs["complete"].all()
     assert all(label.startswith("TD3Late HER") for label in runs["config"])  # its class name, not its path
+    assert sorted(label.rpartition(" (")[2] for label in runs["config"]) == \
+        ["learner.td3late.actor_start=2)", "learner.td3late.actor_start=3)"]  # the settings as one types them
 
 
 @pytest.fixture
@@ -263,3 +236,60 @@ def test_settings_of_your_own_learner_beside_ddpg_say_ddpg_has_none_and_what_to_
                                           r"<folder>/learner/<choice>\.yaml holding _target_: <module>\.<Class> and "
                                           r"td3late: .*hydra\.searchpath=\[file:///<folder>\] learner=ddpg,<choice>"):
         TrainConfig(learner={"name": "ddpg", "td3late": {"actor_start": 2}})
+
+
+# A learner whose settings check themselves with an error of their own (not ConfigError), and with a ConfigError.
+LATE_CHECKED = '''
+
+@dataclass
+class CheckedSettings(TD3Config):
+    x: int = 0
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.x >= 1:
+            raise ValueError("x must be\\n< 1")
+        if self.x < -5:
+            raise ConfigError(f"learner.checkedlate.x must be >= -5, got {self.x}")
+
+
+class CheckedLate(TD3):
+    SETTINGS = CheckedSettings
+
+
+@dataclass
+class NeverSettings(TD3Config):
+    def __post_init__(self):
+        raise RuntimeError("not today")
+
+
+class NeverLate(TD3):
+    SETTINGS = NeverSettings
+'''
+
+
+def test_an_error_of_its_own_in_the_settings_check_is_one_line_naming_the_learner(user_late, capsys):
+    """A ValueError in the settings' __post_init__ was a traceback (exit 1); a ConfigError passes as written."""
+    from hersd.contract.config import TrainConfig
+    from hersd.engine.cli import main as train_main
+
+    (user_late / "user_late.py").write_text(LATE + LATE_CHECKED)
+    with pytest.raises(ConfigError) as refused:
+        TrainConfig(learner={"_target_": "user_late.CheckedLate", "checkedlate": {"x": 2, "policy_delay": 3}})
+    assert str(refused.value) == ("learner user_late.CheckedLate: its settings refused learner.checkedlate.x=2 "
+                                  "learner.checkedlate.policy_delay=3: ValueError: x must be < 1")
+    with pytest.raises(ConfigError, match=r"^learner\.checkedlate\.x must be >= -5, got -9$"):
+        TrainConfig(learner={"_target_": "user_late.CheckedLate", "checkedlate": {"x": -9}})
+    with pytest.raises(ConfigError, match=r"^learner user_late\.NeverLate: its settings refused their defaults: "
+                                          r"RuntimeError: not today$"):
+        TrainConfig(learner={"_target_": "user_late.NeverLate"})
+    assert TrainConfig(learner={"_target_": "user_late.CheckedLate", "checkedlate": {"x": 0}}).learner.settings.x == 0
+
+    results = user_late / "results"
+    with pytest.raises(SystemExit) as ended:
+        train_main([*TINY, "epochs=1", f"results_dir={results}", "learner._target_=user_late.CheckedLate",
+                    "learner.checkedlate.x=2"])
+    assert ended.value.code == 2 and capsys.readouterr().err == (
+        "hersd-train: error: learner user_late.CheckedLate: its settings refused learner.checkedlate.x=2: ValueError: "
+        "x must be < 1\n")
+    assert not results.exists()

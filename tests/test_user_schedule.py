@@ -4,11 +4,15 @@ on PYTHONPATH; and by an entry point of the group ``hersd.schedules``."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
 from helpers import TINY, command
+from user_schedules import command as user_command
 
+from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import read_run
 
 # A user's module: Step declares no kind, so it is selected and recorded by its path; RegisteredStep is
@@ -144,3 +148,236 @@ def test_the_smoke_grid_plans_a_users_schedule_beside_her(tmp_path):
     for tag in ("constant-0.8", "kstep-high_0.9-low_0.5-k0_2"):
         assert sorted(line.split()[1].rsplit("/", 1)[1][:5] for line in planned.splitlines()
                       if f"/{tag}/" in line) == ["seed0", "seed1"], planned
+
+
+# A newcomer's schedules that hersd refuses, each in one line before any work: a tag() that is no folder name (or
+# raises), settings named as a member of Schedule (schedule.tag would be a number, not the method), and a
+# __post_init__ or resolve() raising an error of its own (not ConfigError).
+ODD = '''
+from dataclasses import dataclass
+
+from hersd.contract.errors import ConfigError
+from hersd.contract.schedules import Schedule, param
+
+
+@dataclass
+class Flat(Schedule):
+    searched = ("low",)
+
+    low: float = param(0.5, 0.0, 1.0, "the rate")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.low
+
+
+@dataclass
+class NoTag(Flat):
+    def tag(self):
+        return None
+
+
+@dataclass
+class EmptyTag(Flat):
+    def tag(self):
+        return ""
+
+
+@dataclass
+class DotTag(Flat):
+    def tag(self):
+        return "."
+
+
+@dataclass
+class UpTag(Flat):
+    def tag(self):
+        return ".."
+
+
+@dataclass
+class Escapes(Flat):
+    def tag(self):
+        return "../../x"
+
+
+@dataclass
+class Backslash(Flat):
+    def tag(self):
+        return "a\\\\b"
+
+
+@dataclass
+class NulTag(Flat):
+    def tag(self):
+        return "a\\0b"
+
+
+@dataclass
+class TagRaises(Flat):
+    def tag(self):
+        raise ValueError("no tag\\nfor this")
+
+
+@dataclass
+class TagSetting(Flat):
+    tag: float = param(0.5, 0.0, 1.0, "a setting named as the folder method")
+
+
+@dataclass
+class LabelSetting(Flat):
+    label: float = param(0.5, 0.0, 1.0, "a setting named as the report's method")
+
+
+@dataclass
+class TitleSetting(Flat):
+    title: float = param(0.5, 0.0, 1.0, "a setting named as the report's panel title")
+
+
+@dataclass
+class SettingsField(Flat):
+    settings: int = 3
+
+
+@dataclass
+class AnnotatedTitle(Flat):
+    title: str = "Flat, annotated"  # a plain field over a class attribute: read as the class's, no setting
+
+
+@dataclass
+class PostValue(Flat):
+    def __post_init__(self):
+        super().__post_init__()
+        if self.low > 0.3:
+            raise ValueError("low must be <= 0.3")
+
+
+@dataclass
+class PostConfig(Flat):
+    def __post_init__(self):
+        super().__post_init__()
+        raise ConfigError("schedule.low: the user's own line")
+
+
+@dataclass
+class ResolveValue(Flat):
+    def resolve(self, total_epochs):
+        raise ValueError("cannot resolve for %d epochs" % total_epochs)
+'''
+
+
+@pytest.fixture
+def user_odd(tmp_path, monkeypatch):
+    """The module ``user_odd`` importable in this process (ODD); forgotten afterwards."""
+    (tmp_path / "user_odd.py").write_text(ODD)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield tmp_path
+    sys.modules.pop("user_odd", None)
+
+
+NO_FOLDER = ("not a folder name; fix user_odd.{0}.tag to return a non-empty name of printable characters without / "
+             "or \\, not . or ..")
+
+
+@pytest.mark.parametrize("name, shown", [("NoTag", "None, a NoneType"), ("EmptyTag", "''"), ("DotTag", "'.'"),
+                                         ("UpTag", "'..'"), ("Escapes", "'../../x'"), ("Backslash", "'a\\\\b'"),
+                                         ("NulTag", "'a\\x00b'")])
+def test_a_tag_that_is_no_plain_folder_name_is_one_line(user_odd, name, shown):
+    """tag() names the level <task>/<algo>/<tag>/ of the run store: None was a traceback in run_dir, '' or '..' or
+    '../../x' filed the run elsewhere in (or outside) the results folder."""
+    from hersd.contract.config import TrainConfig
+
+    with pytest.raises(ConfigError) as refused:
+        TrainConfig(schedule={"_target_": f"user_odd.{name}"}, epochs=2)
+    assert str(refused.value) == f"schedule user_odd.{name}: tag() returned {shown}, {NO_FOLDER.format(name)}"
+
+
+def test_a_tag_that_raises_is_one_line(user_odd):
+    from hersd.contract.config import TrainConfig
+
+    with pytest.raises(ConfigError, match=r"^schedule user_odd\.TagRaises: tag\(\) raised ValueError: no tag for "
+                                          r"this$"):
+        TrainConfig(schedule={"_target_": "user_odd.TagRaises"}, epochs=2)
+
+
+def test_train_sweep_and_search_refuse_a_tag_in_one_line_before_any_work(tmp_path):
+    (tmp_path / "user_odd.py").write_text(ODD)
+    results = tmp_path / "results"
+    run = [*TINY, "epochs=1", f"results_dir={results}"]
+    trained = user_command("hersd.engine.cli:main", [*run, "schedule._target_=user_odd.NoTag"], tmp_path, code=2)
+    assert trained.stderr == f"hersd-train: error: schedule user_odd.NoTag: tag() returned None, a NoneType, " \
+                             f"{NO_FOLDER.format('NoTag')}\n"
+    swept = user_command("sweeps.launch:main", [*run, "seeds=1", "schedule._target_=user_odd.Escapes"], tmp_path, code=2)
+    assert swept.stderr.count("\n") == 1 and swept.stderr.startswith("hersd-sweep: error: ")
+    assert swept.stderr.endswith(f"schedule user_odd.Escapes: tag() returned '../../x', {NO_FOLDER.format('Escapes')}\n")
+    searched = user_command("sweeps.search.cli:main", [*run, "search.n_trials=1", "search.space.kinds=[user_odd.TagRaises]"],
+                            tmp_path, code=2)
+    assert searched.stderr.count("\n") == 1 and searched.stderr.startswith("hersd-search: error: ")
+    assert searched.stderr.endswith("schedule user_odd.TagRaises: tag() raised ValueError: no tag for this\n")
+    assert not results.exists() and not (tmp_path / "x").exists()
+
+
+def test_a_search_refuses_a_range_end_its_post_init_raises_on_in_one_line(tmp_path):
+    """The search builds each searched kind at both ends of its ranges before any trial: low=1.0 raises."""
+    (tmp_path / "user_odd.py").write_text(ODD)
+    run = [*TINY, "epochs=1", f"results_dir={tmp_path / 'results'}", "search.n_trials=1"]
+    searched = user_command("sweeps.search.cli:main", [*run, "search.space.kinds=[user_odd.PostValue]"], tmp_path, code=2)
+    assert searched.stderr.count("\n") == 1 and searched.stderr.startswith("hersd-search: error: ")
+    assert searched.stderr.endswith("schedule user_odd.PostValue: its settings refused schedule.low=1.0: ValueError: "
+                                    "low must be <= 0.3\n")
+    assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("name, member, what, used", [("TagSetting", "tag", "setting", "calls"),
+                                                      ("LabelSetting", "label", "setting", "calls"),
+                                                      ("TitleSetting", "title", "setting", "reads"),
+                                                      ("SettingsField", "settings", "field", "calls")])
+def test_a_setting_named_as_a_member_of_schedule_is_one_line_saying_to_rename_it(user_odd, name, member, what, used):
+    """A setting named tag was a traceback ('float' object is not callable); one named label trained, and
+    hersd-report then found none of its logs readable, saying no more."""
+    from hersd.contract.schedules import schedule_class
+
+    with pytest.raises(ConfigError) as refused:
+        schedule_class(f"user_odd.{name}")
+    assert str(refused.value) == (f"schedule user_odd.{name}: its {what} {member} shadows Schedule.{member}, which "
+                                  f"hersd {used}; rename the {what}")
+    assert schedule_class("user_odd.AnnotatedTitle").title == "Flat, annotated"  # no setting, no method: as before
+
+
+def test_train_refuses_a_setting_named_label_before_any_work(tmp_path):
+    (tmp_path / "user_odd.py").write_text(ODD)
+    results = tmp_path / "results"
+    refused = user_command("hersd.engine.cli:main", [*TINY, "epochs=1", f"results_dir={results}",
+                                                     "schedule._target_=user_odd.LabelSetting"], tmp_path, code=2)
+    assert refused.stderr == ("hersd-train: error: schedule user_odd.LabelSetting: its setting label shadows "
+                              "Schedule.label, which hersd calls; rename the setting\n")
+    assert not results.exists()
+
+
+def test_an_error_of_its_own_in_post_init_or_resolve_is_one_line_naming_the_schedule(user_odd):
+    """A ValueError in a schedule's __post_init__ or resolve() was a traceback (exit 1); a ConfigError passes as
+    the user wrote it."""
+    from hersd.contract.config import TrainConfig
+
+    with pytest.raises(ConfigError) as refused:
+        TrainConfig(schedule={"_target_": "user_odd.PostValue", "low": 0.4}, epochs=2)
+    assert str(refused.value) == ("schedule user_odd.PostValue: its settings refused schedule.low=0.4: ValueError: "
+                                  "low must be <= 0.3")
+    with pytest.raises(ConfigError, match=r"^schedule user_odd\.PostValue: its settings refused their defaults: "):
+        TrainConfig(schedule={"_target_": "user_odd.PostValue"}, epochs=2)
+    assert TrainConfig(schedule={"_target_": "user_odd.PostValue", "low": 0.2}, epochs=2).schedule.low == 0.2
+    with pytest.raises(ConfigError, match=r"^schedule\.low: the user's own line$"):
+        TrainConfig(schedule={"_target_": "user_odd.PostConfig"}, epochs=2)
+    with pytest.raises(ConfigError, match=r"^schedule user_odd\.ResolveValue: resolve\(\) raised ValueError: cannot "
+                                          r"resolve for 2 epochs$"):
+        TrainConfig(schedule={"_target_": "user_odd.ResolveValue"}, epochs=2)
+
+
+def test_train_refuses_a_post_init_error_in_one_line_before_any_work(tmp_path):
+    (tmp_path / "user_odd.py").write_text(ODD)
+    results = tmp_path / "results"
+    refused = user_command("hersd.engine.cli:main", [*TINY, "epochs=1", f"results_dir={results}",
+                                                     "schedule._target_=user_odd.PostValue", "schedule.low=0.4"],
+                           tmp_path, code=2)
+    assert refused.stderr == ("hersd-train: error: schedule user_odd.PostValue: its settings refused schedule.low=0.4: "
+                              "ValueError: low must be <= 0.3\n")
+    assert not results.exists()

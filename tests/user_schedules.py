@@ -87,7 +87,8 @@ def environment(module_dir: Path) -> dict[str, str]:
 
 # A second module of a newcomer's classes, for the search's ranges (tests/test_search_config.py): OwnEps and HalfDrop
 # declare settings the package's kinds declare too (eps, beta1), over their own ranges; HerLike inherits constant's
-# eps; ShortStep declares KStep's k0 over another range, WholeLow KStep's low as a whole number.
+# eps; ShortStep declares KStep's k0 over another range, WholeLow KStep's low as a whole number; LambdaLow a
+# setting named as a search's trial names ARCHER's weight.
 SHARED_MODULE = "newcomer_shared"
 SHARED_SOURCE = '''
 from dataclasses import dataclass
@@ -128,6 +129,16 @@ class ShortStep(Schedule):
 
     def rate(self, k, total_epochs, train_success=()):
         return 0.9 if k <= self.k0 else 0.5
+
+
+@dataclass
+class LambdaLow(Schedule):
+    searched = ("lambda_h",)
+
+    lambda_h: float = param(0.5, 0.0, 1.0, "the rate (a name a search's trial gives ARCHER's weight)")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.lambda_h
 
 
 @dataclass

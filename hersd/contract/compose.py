@@ -117,10 +117,14 @@ def explain_config_error(err: Exception, what: str = "config field", see: str = 
             group, value = value, ""
         if group == "learner" and value and (instead := typed_instead(value)):
             return f"learner={value} names a class, which no config of the learner group holds; type {instead}"
+        if group == "schedule" and "." in value:
+            return (f"schedule={value} names a class, which no config of the schedule group holds; type "
+                    f"schedule._target_={value} (a sweep over several: schedule.kind=<kind or class>,...)")
         choices = sorted(err.options) if err.options is not None else group_options(group)
+        own_class = {"learner": TARGET_KEY, "schedule": "schedule._target_"}.get(group)
         return (f"{group}={value} is not a known {group}" if value else f"{err.missing_cfg_file} is unknown") + \
             (f"; choose one of: {', '.join(choices)}" if choices else "") + \
-            (f", or a class of your own: {TARGET_KEY}=<module>.<Class>" if group == "learner" else "")
+            (f", or a class of your own: {own_class}=<module>.<Class>" if own_class else "")
     cause = err.__cause__ if err.__cause__ is not None else err
     key = getattr(cause, "full_key", None)
     if isinstance(cause, (ConfigAttributeError, ConfigKeyError)) and key:

@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import learner_class, recorded_name
 from hersd.contract.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
+from hersd.contract.schedules.registry import raised
 from hersd.contract.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 
 GOAL_STRATEGIES = ("future", "final", "episode")
@@ -298,7 +299,7 @@ def learner_from_config(node: Any) -> LearnerConfig:
         _check(PACKAGE_LEARNERS.get(key) is not None, no_setting(name, settings_class, key))
         learner_settings(key, PACKAGE_LEARNERS[key], section)
     _check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
-    return LearnerConfig(name, learner_settings(learner_key(name), settings_class, own or {}) if settings_class else None)
+    return LearnerConfig(name, learner_settings(own_key, settings_class, own or {}, name) if settings_class else None)
 
 
 def no_setting(name: str, settings_class: Optional[type], key: str) -> str:
@@ -312,8 +313,9 @@ def no_setting(name: str, settings_class: Optional[type], key: str) -> str:
             "docs/LEARNERS.md \"Add a learner\")")
 
 
-def learner_settings(key: str, settings_class: type, section: Any) -> Any:
-    """``settings_class(**section)``; ConfigError (one line) for a key it lacks or a section that is no mapping."""
+def learner_settings(key: str, settings_class: type, section: Any, name: Optional[str] = None) -> Any:
+    """``settings_class(**section)``; ConfigError (one line) for a key it lacks, a section that is no mapping, or
+    an error other than ConfigError its ``__post_init__`` raises (naming the learner ``name``, else ``key``)."""
     fields = [item.name for item in dataclasses.fields(settings_class)]
     _check(isinstance(section, dict), f"learner.{key} must hold settings ({', '.join(fields)}), got {section!r}")
     unknown = sorted(set(section) - set(fields))
@@ -323,10 +325,17 @@ def learner_settings(key: str, settings_class: type, section: Any) -> Any:
         types = typing.get_type_hints(settings_class)
     except (NameError, TypeError):  # annotations that do not resolve here: the class's own checks only
         types = {}
+    values = {field_name: _typed(f"learner.{key}.{field_name}", types.get(field_name), value)
+              for field_name, value in section.items()}
     token = _SETTINGS_KEY.set(key)  # the class's own range checks name this key (setting_name)
     try:
-        return settings_class(**{name: _typed(f"learner.{key}.{name}", types.get(name), value)
-                                 for name, value in section.items()})
+        return settings_class(**values)
+    except ConfigError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's __post_init__: one line naming it, before any work
+        given = " ".join(f"learner.{key}.{field_name}={value}" for field_name, value in section.items())
+        raise ConfigError(f"learner {name or key}: its settings refused {given or 'their defaults'}: {raised(err)}") \
+            from None
     finally:
         _SETTINGS_KEY.reset(token)
 
@@ -358,6 +367,15 @@ def learner_record(learner: LearnerConfig) -> dict[str, Any]:
     under that name (none for a learner without settings)."""
     own = {} if learner.settings is None else {learner.name: dataclasses.asdict(learner.settings)}
     return {"name": learner.name, **own}
+
+
+def learner_node(record: dict[str, Any]) -> dict[str, Any]:
+    """A log's learner record (:func:`learner_record`) -> the ``learner`` config node it was composed from: a
+    class recorded by its path keeps its settings under :func:`learner_key` (``learner.td3late.*``)."""
+    node, name = dict(record), record.get("name", "")
+    if name in node and learner_key(name) != name:
+        node[learner_key(name)] = node.pop(name)
+    return node
 
 
 @dataclass

@@ -25,6 +25,7 @@ from typing import Any
 from hersd.contract.config import TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import SCHEDULES, Schedule, known_kinds, schedule_class
+from hersd.contract.schedules.registry import build
 
 JOURNAL_PREFIX = "journal:"
 JOURNAL_SUFFIXES = (".log", ".journal")
@@ -180,7 +181,7 @@ def trial_params(stored: dict[str, Any], kind: str | None = None) -> dict[str, A
 def schedule_config(params: dict[str, Any]) -> Schedule:
     """A trial's schedule: its kind, with that kind's parameters given in ``params`` (the class's checks run)."""
     kind = params["kind"]
-    return schedule_class(kind)(**{name: float(params[name]) for name in kind_params(kind) if name in params})
+    return build(schedule_class(kind), {name: float(params[name]) for name in kind_params(kind) if name in params}, kind)
 
 
 def trial_config(base: TrainConfig, params: dict[str, Any], seed: int, threads: str | None = None) -> TrainConfig:

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from hersd.contract.config import TaskConfig, TrainConfig, to_train_config
+from hersd.contract.config import TaskConfig, TrainConfig, learner_node, to_train_config
 from hersd.contract.errors import ConfigError
 from hersd.engine.denormals import denormals_flushed, set_intra_op_threads
 from hersd.engine.learners import GoalConditionedLearner
@@ -216,7 +216,8 @@ def render_policy(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int, p
 # --------------------------------------------------------------------------- hersd-render
 def config_from_log(config: dict[str, Any]) -> TrainConfig:
     """The TrainConfig of a log's ``/run/meta`` config dict (fields it lacks take their defaults; of its schedule
-    record only the settings its kind has: the paper's kinds log the flat schema's other fields too)."""
+    record only the settings its kind has: the paper's kinds log the flat schema's other fields too; an outside
+    learner's settings under the key it was configured by)."""
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
@@ -224,6 +225,8 @@ def config_from_log(config: dict[str, Any]) -> TrainConfig:
         schedule = schedule_from_record(config["schedule"])
         config = {**config, "schedule": {"kind": config["schedule"]["kind"],
                                          **{item.name: getattr(schedule, item.name) for item in schedule.params()}}}
+    if config.get("learner"):
+        config = {**config, "learner": learner_node(config["learner"])}
     try:
         return to_train_config(OmegaConf.merge(OmegaConf.structured(TrainConfig), config))
     except OmegaConfBaseException as err:

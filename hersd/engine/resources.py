@@ -62,7 +62,9 @@ def check_precision(precision: str, device_type: str) -> None:
 def check_machine(device: str, precision: str) -> None:
     """ConfigError if this machine cannot train a run of ``device`` and ``precision`` (:func:`resolve_device`, then
     :func:`check_precision`): what ``hersd-train``, and a sweep or search training here, check before it starts.
-    Loads torch only for a device other than ``cpu``."""
+    Loads torch only where the answer needs it: a ``cuda`` device, or ``auto`` with bf16."""
+    if device in ("cpu", "auto") and precision == "fp32":  # auto falls back to the CPU, which runs fp32
+        return
     check_precision(precision, "cpu" if device == "cpu" else resolve_device(device).type)
 
 

@@ -139,6 +139,10 @@ def check_space(space: SpaceConfig) -> None:
             raise ConfigError(f"search.space.kinds: {err}") from None
         check(fits, f"search.space.kinds: {kind} cannot be searched (it declares no searched parameters or adapts "
                     f"to the run); searchable kinds: {', '.join(k for k in known_kinds() if searchable(k))}")
+        for name in set(kind_params(kind)) & {"kind", REWARD_PARAM}:  # a trial's parameters name these already
+            used = "the schedule's kind" if name == "kind" else f"ARCHER's reward weight algo.{REWARD_PARAM}"
+            raise ConfigError(f"search.space.kinds: {kind} searches a setting named {name}, the name a trial gives "
+                              f"{used}; rename the setting in the class")
     drawn = {name for kind in kinds for name in kind_params(kind)}
     for name in space.ranges:
         check(name in drawn, f"search.space.ranges.{name}: no searched kind draws {name}; they draw "

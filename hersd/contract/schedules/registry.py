@@ -9,7 +9,7 @@ from typing import Any, Mapping
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.plugins import class_at, entry_point_class, entry_point_names
-from hersd.contract.schedules.base import Schedule, check_rates
+from hersd.contract.schedules.base import Schedule, check_rates, kind_name
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.cosine import Cosine
 from hersd.contract.schedules.exponential import Exponential
@@ -53,6 +53,11 @@ def schedule_class(kind: str) -> type[Schedule]:
     if any(isinstance(value, dataclasses.Field) for value in vars(cls).values()):  # param() fields left unprocessed
         raise ConfigError(f"schedule {kind}: put @dataclass above its class (from dataclasses import dataclass): "
                           "its param() settings are dataclass fields")
+    for item in dataclasses.fields(cls):  # a setting named tag makes schedule.tag a number, not the method
+        if item.name in dir(Schedule) and ("doc" in item.metadata or callable(getattr(Schedule, item.name))):
+            what = "setting" if "doc" in item.metadata else "field"
+            raise ConfigError(f"schedule {kind}: its {what} {item.name} shadows Schedule.{item.name}, which hersd "
+                              f"{'calls' if callable(getattr(Schedule, item.name)) else 'reads'}; rename the {what}")
     if cls.rate is Schedule.rate:
         raise ConfigError(f"schedule {kind} defines no rate(self, k, total_epochs, train_success=()); "
                           "a schedule needs it (tag and label have defaults)")
@@ -71,16 +76,59 @@ def schedule_from_config(node: Mapping[str, Any], total_epochs: int) -> Schedule
     if unknown:
         raise ConfigError(f"schedule.{unknown[0]} is not a setting of schedule {target or kind or DEFAULT.kind}; "
                           f"its settings: {', '.join(names) or 'none'}")
-    return settle(cls(**settings), total_epochs)
+    return settle(build(cls, settings, target or kind or DEFAULT.kind), total_epochs)
+
+
+def build(cls: type[Schedule], settings: Mapping[str, Any], name: str) -> Schedule:
+    """``cls(**settings)``; an error other than ConfigError its ``__post_init__`` raises is one ConfigError line
+    naming the schedule ``name`` and the settings."""
+    try:
+        return cls(**settings)
+    except ConfigError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's __post_init__: one line naming it, before any work
+        given = " ".join(f"schedule.{key}={value}" for key, value in settings.items()) or "their defaults"
+        raise ConfigError(f"schedule {name}: its settings refused {given}: {raised(err)}") from None
 
 
 def settle(schedule: Schedule, total_epochs: int) -> Schedule:
     """The schedule a run of total_epochs uses: the kind it equals (:meth:`Schedule.equivalent`), resolved for
-    total_epochs, its rates checked in [0, 1] if it does not adapt (ScheduleRateError, one line)."""
+    total_epochs, its tag checked (:func:`check_tag`), its rates checked in [0, 1] if it does not adapt
+    (ScheduleRateError, one line)."""
     schedule = schedule.equivalent()
-    schedule.resolve(total_epochs)
+    try:
+        schedule.resolve(total_epochs)
+    except ConfigError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's resolve: one line naming it, before any work
+        raise ConfigError(f"schedule {kind_name(type(schedule))}: resolve() raised {raised(err)}") from None
+    check_tag(schedule)
     check_rates(schedule, total_epochs)
     return schedule
+
+
+def check_tag(schedule: Schedule) -> None:
+    """ConfigError (one line) unless ``schedule.tag()`` is a plain folder name, the one level of
+    ``<task>/<algo>/<tag>/<seed-hash>`` it names: a non-empty str of printable characters without ``/`` or ``\\``,
+    not ``.`` or ``..``."""
+    name = kind_name(type(schedule))
+    try:
+        tag = schedule.tag()
+    except ConfigError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's tag: one line naming it, before any work
+        raise ConfigError(f"schedule {name}: tag() raised {raised(err)}") from None
+    if not (isinstance(tag, str) and tag not in ("", ".", "..") and tag.isprintable()
+            and "/" not in tag and "\\" not in tag):
+        shown = repr(tag) if isinstance(tag, str) else f"{' '.join(repr(tag).split())}, a {type(tag).__name__}"
+        raise ConfigError(f"schedule {name}: tag() returned {shown}, not a folder name; fix {name}.tag to return a "
+                          "non-empty name of printable characters without / or \\, not . or ..")
+
+
+def raised(err: Exception) -> str:
+    """A user's error as one line: ``ValueError: <its message, on one line>``."""
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
 
 
 def schedule_from_record(record: Mapping[str, Any]) -> Schedule:
