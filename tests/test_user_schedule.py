@@ -213,6 +213,12 @@ class NulTag(Flat):
 
 
 @dataclass
+class LongTag(Flat):
+    def tag(self):
+        return "x" * 256
+
+
+@dataclass
 class TagRaises(Flat):
     def tag(self):
         raise ValueError("no tag\\nfor this")
@@ -275,12 +281,12 @@ def user_odd(tmp_path, monkeypatch):
 
 
 NO_FOLDER = ("not a folder name; fix user_odd.{0}.tag to return a non-empty name of printable characters without / "
-             "or \\, not . or ..")
+             "or \\, not . or .., of at most 255 bytes")
 
 
 @pytest.mark.parametrize("name, shown", [("NoTag", "None, a NoneType"), ("EmptyTag", "''"), ("DotTag", "'.'"),
                                          ("UpTag", "'..'"), ("Escapes", "'../../x'"), ("Backslash", "'a\\\\b'"),
-                                         ("NulTag", "'a\\x00b'")])
+                                         ("NulTag", "'a\\x00b'"), ("LongTag", repr("x" * 256))])
 def test_a_tag_that_is_no_plain_folder_name_is_one_line(user_odd, name, shown):
     """tag() names the level <task>/<algo>/<tag>/ of the run store: None was a traceback in run_dir, '' or '..' or
     '../../x' filed the run elsewhere in (or outside) the results folder."""

@@ -110,7 +110,7 @@ def settle(schedule: Schedule, total_epochs: int) -> Schedule:
 def check_tag(schedule: Schedule) -> None:
     """ConfigError (one line) unless ``schedule.tag()`` is a plain folder name, the one level of
     ``<task>/<algo>/<tag>/<seed-hash>`` it names: a non-empty str of printable characters without ``/`` or ``\\``,
-    not ``.`` or ``..``."""
+    not ``.`` or ``..``, of at most 255 bytes (a folder name's limit)."""
     name = kind_name(type(schedule))
     try:
         tag = schedule.tag()
@@ -119,10 +119,10 @@ def check_tag(schedule: Schedule) -> None:
     except Exception as err:  # noqa: BLE001 - a user's tag: one line naming it, before any work
         raise ConfigError(f"schedule {name}: tag() raised {raised(err)}") from None
     if not (isinstance(tag, str) and tag not in ("", ".", "..") and tag.isprintable()
-            and "/" not in tag and "\\" not in tag):
+            and "/" not in tag and "\\" not in tag and len(tag.encode()) <= 255):  # 255: a folder name's limit
         shown = repr(tag) if isinstance(tag, str) else f"{' '.join(repr(tag).split())}, a {type(tag).__name__}"
         raise ConfigError(f"schedule {name}: tag() returned {shown}, not a folder name; fix {name}.tag to return a "
-                          "non-empty name of printable characters without / or \\, not . or ..")
+                          "non-empty name of printable characters without / or \\, not . or .., of at most 255 bytes")
 
 
 def raised(err: Exception) -> str:
