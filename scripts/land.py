@@ -11,9 +11,11 @@ CAMPAIGN_DIR defaults to ~/hersd-campaign (a sweep's ``results_dir``), RESULTS t
 repository's ``results/``. Every file is written through a temporary file and a rename, so no
 copy is ever half written; a complete log there is never replaced by an unfinished one (``kept``);
 animations there that the run no longer has (an earlier attempt's, when it restarted) are
-removed. An unfinished log there with more epochs than the campaign's (the run restarted without
-a checkpoint and has not caught up) is kept too, until the new attempt passes it. One line per
-run: ``landed``, ``unchanged`` or ``kept``, with its state.
+removed when its log is landed anew. An unfinished log there with more epochs than the campaign's (the
+run restarted without a checkpoint and has not caught up) is kept too, until the new attempt passes
+it. A campaign log that is not a readable run log (no run metadata) is not landed (``skipped``); a
+chunk whose checksum fails ends what is read of a log, like a cut (hersd.contract.runlog). One line
+per run: ``landed``, ``unchanged``, ``kept`` or ``skipped``, with its state.
 
 ``--commit``: each complete run whose files differ from git's is committed alone, those files
 only (whatever else is staged stays staged): ``results: <run> complete (K epochs)``. A git
@@ -61,27 +63,26 @@ def write_atomically(data: bytes, target: Path) -> bool:
 
 def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
     """Copy one run directory's log and animations -> (verb, complete, state of the log landed or kept)."""
-    snapshot = target.with_name(f".{target.name}.{os.getpid()}.snapshot")  # the bytes copied, judged
+    snapshot = target.with_name(f".{target.name}.{os.getpid()}.snapshot.tmp")  # the bytes copied, judged
     snapshot.parent.mkdir(parents=True, exist_ok=True)
     snapshot.write_bytes((source / LOG_NAME).read_bytes())  # one snapshot of a log that may be growing
     try:
         complete, epochs, state = log_state(snapshot)
+        if epochs < 0:
+            return "skipped", False, f"{state}: not landed"
         if not complete and (target / LOG_NAME).exists():
             landed_complete, landed_epochs, landed_state = log_state(target / LOG_NAME)
             if landed_complete or landed_epochs > epochs:  # a run that restarted has not caught up yet
                 return "kept", landed_complete, f"{landed_state} (the campaign's copy: {state})"
-        try:
-            data = rewritten(snapshot)  # in the current format, whatever hersd wrote it
-        except RunLogError:
-            data = snapshot.read_bytes()
-        changed = write_atomically(data, target / LOG_NAME)
+        log_changed = write_atomically(rewritten(snapshot), target / LOG_NAME)  # the current format, whatever hersd wrote it
     finally:
         snapshot.unlink(missing_ok=True)
     animations = RunFolder(source).animations()
+    changed = log_changed
     for path in animations.values():
         changed |= write_atomically(path.read_bytes(), target / POLICY_DIR / path.name)
     for epoch, path in RunFolder(target).animations().items():
-        if epoch not in animations:
+        if log_changed and epoch not in animations:  # an earlier attempt's, not a source's lost file
             path.unlink()
             changed = True
     return ("landed" if changed else "unchanged"), complete, state

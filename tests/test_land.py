@@ -3,7 +3,9 @@ atomically, never a complete log replaced by an unfinished one, each complete ru
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -88,7 +90,7 @@ def test_a_complete_log_is_never_replaced_by_an_unfinished_one_and_stale_animati
     assert read_records(results / DONE / "run.mcap").complete
     assert len(read_records(results / RUNNING / "run.mcap").records) == 20
     assert sorted(p.name for p in (results / RUNNING / "policy").iterdir()) == ["epoch_10.gif"]
-    assert not list(results.rglob(".*tmp")) and not list(results.rglob("*.snapshot"))
+    assert not list(results.rglob(".*tmp")) and not list(results.rglob("*.snapshot*"))
     assert git(repo, "log", "--format=%s") == "start\n"  # no --commit: nothing committed
 
 
@@ -102,6 +104,63 @@ def test_an_unfinished_log_with_more_epochs_is_kept_until_a_restarted_run_passes
     write_log(campaign / RUNNING, 40)
     assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 40" in land(campaign, repo).stdout
     assert len(read_records(results / RUNNING / "run.mcap").records) == 40
+
+
+def corrupt_one_digit(log: Path, epoch: int) -> None:
+    """Change one digit of an epoch's test success inside its chunk: still valid JSON, a failing checksum."""
+    data = bytearray(log.read_bytes())
+    at = [match.end() for match in re.finditer(rb'"test_success": 0\.', data)][epoch - 1]
+    data[at] = ord("9") if data[at] != ord("9") else ord("1")
+    log.write_bytes(bytes(data))
+
+
+def test_a_complete_log_whose_checksum_fails_replaces_no_good_log(tmp_path, repo):
+    """A damaged chunk ends what is read of the campaign's copy: it is no complete log, the landed one stays."""
+    campaign, results = tmp_path / "campaign", repo / "results"
+    write_log(results / DONE, 200, complete=True)
+    write_log(campaign / DONE, 200, complete=True)
+    good = (results / DONE / "run.mcap").read_bytes()
+    corrupt_one_digit(campaign / DONE / "run.mcap", 150)
+    records = read_records(campaign / DONE / "run.mcap")
+    assert records.damaged and not records.complete and len(records.records) < 150
+    out = land(campaign, repo, "--commit").stdout
+    assert f"kept      {results / DONE / 'run.mcap'}  complete (200 epochs)" in out
+    assert (results / DONE / "run.mcap").read_bytes() == good
+
+
+def test_a_log_that_is_no_run_log_is_skipped_and_nothing_of_its_run_lands(tmp_path, repo):
+    campaign, results = tmp_path / "campaign", repo / "results"
+    write_log(campaign / RUNNING, 5)
+    write_animation(campaign / RUNNING, 5)
+    log = campaign / RUNNING / "run.mcap"
+    log.write_bytes(log.read_bytes()[:100])  # cut before its metadata
+    out = land(campaign, repo).stdout
+    assert f"skipped   {results / RUNNING / 'run.mcap'}  unreadable: not landed" in out
+    assert not (results / RUNNING).exists() and not list(results.rglob("*.snapshot*"))
+
+
+def test_animations_stay_when_the_log_is_the_same_attempt(tmp_path, repo):
+    """Only a log landed anew (an attempt that restarted) takes the animations it lacks away."""
+    campaign, results = tmp_path / "campaign", repo / "results"
+    write_log(campaign / DONE, 200, complete=True)
+    write_animation(campaign / DONE, 50)
+    land(campaign, repo, "--commit")
+    (campaign / DONE / "policy" / "epoch_50.gif").unlink()
+    assert "unchanged" in land(campaign, repo, "--commit").stdout.splitlines()[0]
+    assert (results / DONE / "policy" / "epoch_50.gif").is_file()
+
+
+def test_the_snapshot_of_a_log_being_judged_is_a_file_git_ignores(tmp_path):
+    """A landing killed mid-way leaves at most a ``*.tmp`` file, which .gitignore keeps out of results/."""
+    spec = importlib.util.spec_from_file_location("land", LAND[1])
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    judged = []
+    write_log(tmp_path / "campaign" / RUNNING, 3)
+    with mock.patch.object(module, "log_state", side_effect=lambda path: judged.append(path) or (False, -1, "x")):
+        module.land_run(tmp_path / "campaign" / RUNNING, tmp_path / "results" / RUNNING)
+    assert judged and judged[0].name.endswith(".tmp") and judged[0].parent == (tmp_path / "results" / RUNNING).parent
+    assert "results/**/*.tmp" in (Path(LAND[1]).parent.parent / ".gitignore").read_text().splitlines()
 
 
 def test_logs_of_the_earlier_format_land_in_the_current_one_with_every_message_identical(tmp_path, repo):

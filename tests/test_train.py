@@ -57,6 +57,19 @@ def test_rerunning_a_complete_run_does_nothing(tmp_path):
     assert train(cfg) == log_path and log_path.read_bytes() == before
 
 
+def test_a_checkpoint_left_beside_a_complete_log_goes_at_the_next_run(tmp_path):
+    """A run killed after its completion marker, before removing its checkpoint: the same command removes it."""
+    cfg = compose([*TINY, "epochs=1", f"results_dir={tmp_path}"])
+    log_path = train(cfg)
+    checkpoint = log_path.parent / "checkpoint.pt"
+    checkpoint.write_bytes(b"left behind")
+    before = log_path.read_bytes()
+    assert train(cfg) == log_path and log_path.read_bytes() == before and not checkpoint.exists()
+    kept = compose([*TINY, "epochs=1", "keep_checkpoint=true", f"results_dir={tmp_path / 'kept'}"])
+    kept_checkpoint = train(kept).parent / "checkpoint.pt"
+    assert kept_checkpoint.exists() and train(kept) and kept_checkpoint.exists()
+
+
 class StopHere(Exception):
     pass
 

@@ -314,7 +314,7 @@ class RunRecords:
     sessions: list[dict[str, Any]]
     records: list[dict[str, Any]]
     complete: bool
-    damaged: bool  # the file has no valid end (cut, or an earlier-format log of a killed or running writer)
+    damaged: bool  # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
     messages: list[LoggedMessage] = field(default_factory=list)
 
     @property
@@ -337,7 +337,7 @@ class RunLog:
     epochs: pd.DataFrame
     complete: bool
     sessions: list[dict[str, Any]] = field(default_factory=list)
-    damaged: bool = False  # the file has no valid end (cut, or an earlier-format log of a killed or running writer)
+    damaged: bool = False  # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
     messages: list[LoggedMessage] = field(default_factory=list)
 
 
@@ -353,15 +353,15 @@ def log_path(path: str | Path) -> Path:
 
 def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
     """Every readable message of a run log (``path``: the file, or the run's folder holding it) in file order
-    (payload nulls dropped) and whether the file was damaged (no valid end: the messages before the damage are
-    returned)."""
+    (payload nulls dropped) and whether the file was damaged (no valid end, or a chunk whose checksum fails:
+    the messages before the damage are returned)."""
     path = log_path(path)
     messages: list[LoggedMessage] = []
     damaged = False
     try:
         with open(path, "rb") as stream:
             try:
-                for _schema, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
+                for _schema, channel, message in NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False):
                     if channel.topic in CHANNELS:
                         messages.append(LoggedMessage(channel.topic, message.log_time, message.publish_time,
                                                       message.sequence,

@@ -244,6 +244,8 @@ def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCa
     with folder.lock():
         previous = _read_previous_log(cfg, log_path, checkpoint_path)
         if previous is not None and previous.complete:
+            if not cfg.keep_checkpoint:  # left by a run killed between its completion marker and the removal
+                checkpoint_path.unlink(missing_ok=True)
             _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), nothing to do")
             return log_path
         threads, device = resolve_threads(cfg.threads), resolve_device(cfg.device)
