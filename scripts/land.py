@@ -74,7 +74,8 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
             landed_complete, landed_epochs, landed_state = log_state(target / LOG_NAME)
             if landed_complete or landed_epochs > epochs:  # a run that restarted has not caught up yet
                 return "kept", landed_complete, f"{landed_state} (the campaign's copy: {state})"
-        log_changed = write_atomically(rewritten(snapshot), target / LOG_NAME)  # the current format, whatever hersd wrote it
+        # in the current format, whatever hersd wrote it
+        log_changed = write_atomically(rewritten(snapshot), target / LOG_NAME)
     finally:
         snapshot.unlink(missing_ok=True)
     animations = RunFolder(source).animations()

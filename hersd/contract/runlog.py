@@ -314,7 +314,8 @@ class RunRecords:
     sessions: list[dict[str, Any]]
     records: list[dict[str, Any]]
     complete: bool
-    damaged: bool  # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
+    # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
+    damaged: bool
     messages: list[LoggedMessage] = field(default_factory=list)
 
     @property
@@ -337,7 +338,8 @@ class RunLog:
     epochs: pd.DataFrame
     complete: bool
     sessions: list[dict[str, Any]] = field(default_factory=list)
-    damaged: bool = False  # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
+    # the file has no valid end (cut, a chunk failing its checksum, or an earlier-format log of a killed or running writer)
+    damaged: bool = False
     messages: list[LoggedMessage] = field(default_factory=list)
 
 
@@ -361,7 +363,8 @@ def read_messages(path: str | Path) -> tuple[list[LoggedMessage], bool]:
     try:
         with open(path, "rb") as stream:
             try:
-                for _schema, channel, message in NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False):
+                reader = NonSeekingReader(stream, validate_crcs=True)
+                for _schema, channel, message in reader.iter_messages(log_time_order=False):
                     if channel.topic in CHANNELS:
                         messages.append(LoggedMessage(channel.topic, message.log_time, message.publish_time,
                                                       message.sequence,
