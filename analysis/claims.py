@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.load import HER_WEIGHTS, PAPER_EPOCHS, config_label
-from analysis.metrics import PERMUTATION_RESAMPLES
+from analysis.metrics import EXACT_SPLITS, PERMUTATION_RESAMPLES, smallest_p_value
 from hersd.contract.tasks import task_title
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.exponential import Exponential
@@ -111,7 +111,7 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
     row |= {"test": permutation_words(seeds, versus_seeds, two_sided), "p": p}
     if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
         return row | {"verdict": f"not reproduced: {failed} at {at}"}
-    if (smallest := smallest_p(seeds, versus_seeds, two_sided)) >= ALPHA:
+    if (smallest := smallest_p_value(seeds, versus_seeds, two_sided)) >= ALPHA:
         apart = ": the arms as far apart as the seeds allow" if math.isclose(p, smallest) else ""
         return row | {"verdict": f"too few seeds to test at {at}{apart}"}
     if claim.alike:
@@ -144,18 +144,12 @@ def _neither_learns(statistic: str, value: float, versus_value: float) -> str | 
     return None
 
 
-def smallest_p(seeds: int, versus_seeds: int, two_sided: bool) -> float:
-    """The smallest p the permutation test can give: one split (two, two-sided) of all, or of the resamples + 1."""
-    splits = math.comb(seeds + versus_seeds, seeds)
-    return (2 if two_sided else 1) / (splits if splits <= PERMUTATION_RESAMPLES else PERMUTATION_RESAMPLES + 1)
-
-
 def permutation_words(seeds: int, versus_seeds: int, two_sided: bool) -> str:
-    """The permutation test's kind and power: exact when the splits number at most PERMUTATION_RESAMPLES."""
+    """The permutation test's kind and power: exact when the splits number at most EXACT_SPLITS."""
     splits = math.comb(seeds + versus_seeds, seeds)
-    kind = "exact" if splits <= PERMUTATION_RESAMPLES else f"{PERMUTATION_RESAMPLES} random splits of {splits}"
+    kind = "exact" if splits <= EXACT_SPLITS else f"{PERMUTATION_RESAMPLES} random splits of {splits}"
     return (f"permutation, {'two' if two_sided else 'one'}-sided, {kind} "
-            f"(smallest p possible {smallest_p(seeds, versus_seeds, two_sided):.2g})")
+            f"(smallest p possible {smallest_p_value(seeds, versus_seeds, two_sided):.2g})")
 
 
 def _measured(claim: Claim, summary: pd.DataFrame, bias_tests: pd.DataFrame):

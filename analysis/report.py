@@ -108,19 +108,19 @@ TABLE_NOTES = {
              "setting."),
     "tests": ("One row per ordered pair of configurations of a task with the same learner and K, each with at "
               "least two complete seeds: each <b>p</b> is a one-sided permutation-test p-value "
-              "(scipy.stats.permutation_test, difference of the means over seeds) that the <b>configuration</b> "
+              "(difference of the means over seeds) that the <b>configuration</b> "
               "does better than the <b>versus configuration</b>: higher final success, fewer epochs to a "
               "threshold (a seed that never reaches it counts as K + 1). Exact: every split of the "
-              "two sides' seeds (5 against 5: 252, so the smallest p is 1/252), or 9999 seeded random splits "
-              "when there are more. Each line is one test; reading many at once, expect some small p by chance."),
+              "two sides' seeds (5 against 5: 252, so the smallest p is 1/252; 10 against 10: 184,756), or "
+              "9999 seeded random splits beyond a million. Each line is one test; reading many at once, expect some small p by chance."),
     "equal_mu": ("Each schedule that decays against the constant rate at the same mean rate μ_ε (same task, learner, "
                  "K, reward weights and MEP; paired automatically): does the decay help, or only relabelling more? One "
                  "row per outcome of each seed (final success, epochs to 0.5 / 0.9 smoothed and raw, a seed that "
                  "never reaches one counted as K + 1, and the mean raw test success over the K epochs): each side's "
                  "mean over seeds, and the one-sided permutation-test p-values in both directions (difference of the "
-                 "means, exact when the splits number at most 9999). <b>Smallest p the seeds allow</b>: 1 over the "
-                 "<b>splits of the seeds</b>, C(n1 + n2, n1) (1/252 at 5 against 5; 1/10000 beyond 9999 splits, drawn "
-                 "at random): no result can be more significant."),
+                 "means, exact up to a million splits). <b>Smallest p the seeds allow</b>: 1 over the "
+                 "<b>splits of the seeds</b>, C(n1 + n2, n1) (1/252 at 5 against 5, 1/184,756 at 10 against 10; "
+                 "1/10000 beyond a million splits, drawn at random): no result can be more significant."),
     "variants": ("Each configuration run at a variant (a setting added after the first runs, at other than its "
                  "earlier value: precision=bf16, update=fast) against the same configuration at the defaults (every "
                  "other setting equal; paired automatically): does it learn the same? The outcomes, means, p-values "
@@ -130,7 +130,7 @@ TABLE_NOTES = {
                      "complete run, averaged over epochs 1-50 (trapezoids over its evaluated epochs), for real and "
                      "for hindsight goals: the configuration's and the versus configuration's means over runs, "
                      "their difference, and a two-sided permutation-test p-value "
-                     "of that difference (scipy.stats.permutation_test, exact up to 9999 splits). Positive bias is "
+                     "of that difference (exact up to a million splits). Positive bias is "
                      "overestimation."),
     "composition": (f"Shares of the sampled minibatch at epoch {PAPER_COMPOSITION_EPOCH} on "
                     f"{task_title(PAPER_COMPOSITION_TASK)} with HER: the paper's numbers (Fig. 2, Sec. III) beside "

@@ -304,6 +304,36 @@ def test_permutation_tests_equal_an_enumeration_of_every_split_of_the_seeds(push
                                                                               "p_epochs_to_0.9"]
 
 
+def test_permutation_p_values_count_every_split_beyond_the_random_tests_reach():
+    """8 seeds against 8 (12,870 splits, more than the PERMUTATION_RESAMPLES random ones a random test would draw):
+    each p is the exact share of all splits at least (at most) as extreme, counted in fractions; 10 against 10
+    (184,756) reaches p = 1 / 184,756 when the sides do not overlap."""
+    rng = np.random.default_rng(3)
+    x, y = rng.integers(0, 21, (3, 8)) / 20, rng.integers(0, 21, (3, 8)) / 20  # success rates on the 20-episode grid
+    p_greater, p_less = metrics.permutation_p_values(x, y)
+    for row in range(3):
+        pooled = [Fraction(int(round(value * 20)), 20) for value in [*x[row], *y[row]]]
+        observed = sum(pooled[:8])
+        sums = [sum(pooled[i] for i in chosen) for chosen in itertools.combinations(range(16), 8)]
+        assert p_greater[row] == sum(total >= observed for total in sums) / 12870
+        assert p_less[row] == sum(total <= observed for total in sums) / 12870
+    apart = metrics.permutation_p_values(np.arange(10.0)[None], np.arange(10.0, 20.0)[None])
+    assert (apart[0][0], apart[1][0]) == (1.0, 1 / 184756)
+    assert metrics.smallest_p_value(10, 10) == 1 / 184756 and metrics.smallest_p_value(10, 10, True) == 2 / 184756
+
+
+def test_permutation_p_values_draw_random_splits_beyond_exact_splits():
+    """12 against 12 (2,704,156 splits, more than EXACT_SPLITS): PERMUTATION_RESAMPLES seeded random splits, so
+    p is (splits as extreme + 1) / 10000, the same for the same seed."""
+    rng = np.random.default_rng(4)
+    x, y = rng.normal(size=(2, 12)), rng.normal(size=(2, 12))
+    p_greater, _ = metrics.permutation_p_values(x, y)
+    counts = p_greater * (metrics.PERMUTATION_RESAMPLES + 1)
+    assert np.allclose(counts, np.round(counts), rtol=0, atol=1e-6)
+    assert np.array_equal(p_greater, metrics.permutation_p_values(x, y)[0])
+    assert metrics.smallest_p_value(12, 12) == 1 / (metrics.PERMUTATION_RESAMPLES + 1)
+
+
 def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and_k(tmp_path):
     """HER and linear at K = 6 (two seeds each), HER at K = 8 (two seeds), linear at K = 8 (one seed):
     only the two K = 6 configurations are tested, against each other."""
