@@ -252,6 +252,17 @@ def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
     assert blocker.read_text() == "not a folder"
 
 
+def test_a_file_where_the_run_folder_goes_under_results_dir_is_one_line_with_exit_2(tmp_path, capsys):
+    blocker = tmp_path / "reach"  # where <results_dir>/<task>/... goes
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, "task=reach", f"results_dir={tmp_path}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"hersd-train: error: results_dir: {blocker} is a file"), err
+    assert err.endswith("pass results_dir=<another folder>") and blocker.read_text() == "not a folder"
+
+
 @pytest.mark.parametrize("inside", ["", "run"])
 def test_an_unusable_run_dir_is_one_line_naming_run_dir_with_exit_2(tmp_path, capsys, inside):
     blocker = tmp_path / "file"

@@ -20,7 +20,7 @@ from hersd.contract.compose import compose_train, explain_config_error, group_ch
 from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig, learner_key, learner_settings_class
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import TARGET_KEY, kind_name, known_kinds, schedule_class
-from hersd.contract.runstore import RunLockedError, check_writable, run_dir
+from hersd.contract.runstore import RunLockedError, check_run_path, check_writable, run_dir
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
 HELP_FLAGS = ("-h", "--help")
@@ -186,6 +186,7 @@ def main(argv: list[str] | None = None) -> None:
         cfg = compose_train(argv)
         if cfg.run_dir is None:
             check_writable(Path(cfg.results_dir))
+            check_run_path(run_dir(cfg), Path(cfg.results_dir))
         else:
             check_writable(Path(cfg.run_dir), "run_dir")
     except ConfigError as err:
