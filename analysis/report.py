@@ -493,8 +493,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     if window < 1:
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
     folder = Path(folder)
-    out = Path(out) if out is not None else folder / "report"
-    _check_out(out)
+    out = _checked_out(Path(out) if out is not None else folder / "report")
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
@@ -540,9 +539,9 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
 
-def _check_out(out: Path) -> None:
-    """Refuse (ReportInputError) an output folder the report cannot be written into: a path that is a file or
-    passes through one, or under a folder that is not writable; checked before any log is read."""
+def _checked_out(out: Path) -> Path:
+    """``out``, or ReportInputError if the report cannot be written into it: a path that is a file or passes
+    through one, or under a folder that is not writable; checked before any log is read."""
     existing = out
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
@@ -552,6 +551,7 @@ def _check_out(out: Path) -> None:
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ReportInputError(f"cannot write the report to {out}: {existing} is not writable; "
                                f"give --out a folder you can write to")
+    return out
 
 
 def _is_report(out: Path) -> bool:
