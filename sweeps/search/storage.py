@@ -15,8 +15,8 @@ import shlex
 from pathlib import Path
 from typing import Any
 
-from hersd.contract.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, SQLITE_PREFIX, StudyStorageError, connect_args, one_line,
-                         shown, storage_file, storage_location, storage_name, with_driver)
+from hersd.contract.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, StudyStorageError, connect_args, one_line,
+                         shown, sqlite_url, storage_file, storage_location, storage_name, with_driver)
 
 SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing
 
@@ -81,7 +81,7 @@ def _sqlite_storage_class() -> type:
             self.claim_lock_path = path.with_name(path.name + ".lock")
             with open(self.claim_lock_path, "a") as lock_file:
                 fcntl.flock(lock_file, fcntl.LOCK_EX)
-                super().__init__(f"{SQLITE_PREFIX}{path}",
+                super().__init__(sqlite_url(path),
                                  engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
 
         def set_trial_state_values(self, trial_id: int, state: TrialState, values=None) -> bool:
