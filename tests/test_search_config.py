@@ -60,6 +60,7 @@ def test_every_search_config_composes_and_plans(name: str, tmp_path: Path) -> No
     ("search.storage=sqlite://", "search.storage: an in-memory SQLite database"),
     ("search.storage=", "search.storage is empty"),
     ("search.storage=journal:", "search.storage=journal:<path> needs a file path"),
+    ("search.storage=sqlite:///x.db?mode=ro", "quote it: 'search.storage=\"sqlite:///x.db?mode=ro\"'"),
     ("search=nope", "search=nope is not a known search; choose one of: ci, default, wide"),
     ("results_dir=/proc/no-such-dir", "results_dir: cannot write to /proc/no-such-dir"),
     # training overrides Hydra refuses: one line, as hersd-train says them

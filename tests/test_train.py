@@ -1,6 +1,7 @@
 """The training run end to end: determinism, resume, the log contract, bad input, learning."""
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -239,6 +240,17 @@ def test_unknown_choice_lists_the_valid_ones(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["task=cartpole", f"results_dir={tmp_path}"])
     assert "pick_and_place, push, reach, slide" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", ["/tmp/é", "a#b", "it's#"])  # Hydra's grammar reads none of these unquoted
+def test_a_value_hydras_grammar_cannot_read_is_one_line_saying_how_to_quote_it(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as exit_info:
+        main([f"results_dir={value}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cannot read this value unquoted; quote it: " in err, err
+    typed = shlex.split(err.split("quote it: ")[1])  # as the shell hands it over
+    assert compose(typed).results_dir == value
 
 
 def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
