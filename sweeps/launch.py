@@ -25,9 +25,10 @@ from omegaconf import DictConfig
 from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choices, group_options, null_group
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import typed_instead
-from hersd.contract.cores import available_cores, resolve_threads
+from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import RunFolder, RunLockedError, check_writable, run_dir
 from sweeps.hydra_private import job_error
+from sweeps.launchers import check_launcher
 from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas
 from sweeps.status import run_status, time_to_go
 
@@ -42,7 +43,7 @@ _hydra_full_error = "0"  # the user's HYDRA_FULL_ERROR ("1": tracebacks), restor
 # None: its jobs run elsewhere, each on its own allocation, and resolve threads=auto there.
 RUNS_AT_ONCE: tuple[tuple[str, Callable[[Any, int], int | None]], ...] = (
     ("partition", lambda partition, n_runs: None),  # a cluster's queue (submitit's SLURM)
-    ("n_jobs", lambda n_jobs, n_runs: int(n_jobs)),  # joblib (1 or more: check_launcher)
+    ("n_jobs", lambda n_jobs, n_runs: int(n_jobs)),  # joblib (1 or more: sweeps.launchers.check_launcher)
     ("array_parallelism", lambda at_most, n_runs: int(at_most or n_runs)),  # an executor's cap
     ("tasks_per_node", lambda tasks, n_runs: n_runs),  # an executor that starts every job (submitit's local)
 )  # none of them (Hydra's basic launcher): one after another
@@ -74,7 +75,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     except ConfigError as err:                         # is valid, though the base's constant has no beta1)
         raise SweepError(str(err), exit_code=2) from None
     sweep_threads = sweeper.config.threads
-    check_launcher(sweeper.config.hydra.launcher)
+    check_launcher(sweeper.config.hydra.launcher, submits=not sweeper.dry_run)
     planned = plan_runs(sweeper, arguments)
     states = {directory: RunFolder(directory).state() for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
@@ -131,18 +132,6 @@ def check_machine_here(machines: set[tuple[str, str]]) -> None:
             check_machine(device, precision)
         except ConfigError as err:
             raise SweepError(str(err), exit_code=2) from None
-
-
-def check_launcher(launcher: DictConfig) -> None:
-    """A launcher's ``n_jobs`` (runs at once on this machine, which threads=auto divides the cores by) must be 1
-    or more (SweepError, exit 2): joblib's counts below 1 (its plugin's default, -1) are refused, not guessed."""
-    if "n_jobs" not in launcher:
-        return
-    n_jobs = launcher.get("n_jobs")
-    if not isinstance(n_jobs, int) or n_jobs < 1:
-        raise SweepError(f"hydra.launcher.n_jobs={n_jobs}: give the number of runs to train at once, 1 or more, "
-                         f"or ${{hersd_cores:}} for one per core ({available_cores()} here, the default of "
-                         "hydra/launcher=local)", exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:

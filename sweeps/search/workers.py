@@ -22,6 +22,7 @@ import optuna
 
 from hersd.contract.compose import CONFIG_MODULE
 from hersd.contract.errors import ConfigError
+from sweeps.launchers import check_slurm as check_slurm_answers
 from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
@@ -105,23 +106,9 @@ def slurm_settings(slurm: SlurmConfig) -> dict[str, Any]:
 
 
 def check_slurm(slurm: SlurmConfig) -> None:
-    """ConfigError unless SLURM answers here (``sinfo``) and has the partition(s) asked for."""
-    import subprocess
-
-    try:
-        done = subprocess.run(["sinfo", "--noheader", "--format=%P"], capture_output=True, text=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired) as err:
-        raise ConfigError(f"search.launcher=slurm: cannot run sinfo here ({err}); submit from a SLURM login "
-                          f"node") from None
-    if done.returncode != 0:
-        reason = (done.stderr.strip().splitlines() or [f"exit code {done.returncode}"])[-1]
-        raise ConfigError(f"search.launcher=slurm: SLURM does not answer here ({reason})")
-    known = [name.rstrip("*") for name in done.stdout.split()]
-    wanted = slurm_settings(slurm)["partition"]
-    missing = [name for name in (wanted or "").split(",") if name and name not in known]
-    if missing:
-        raise ConfigError(f"search.slurm.partition={wanted}: no partition {', '.join(missing)} here; "
-                          f"choose among: {', '.join(known)}")
+    """ConfigError unless SLURM answers here (``sinfo``) and has the partition(s) asked for, as hersd-sweep
+    checks its own (:func:`sweeps.launchers.check_slurm`)."""
+    check_slurm_answers(slurm_settings(slurm)["partition"], "search.launcher=slurm", "search.slurm.partition")
 
 
 def submit_slurm(plan: SearchPlan, shares: list[int]) -> list[str]:
