@@ -5,6 +5,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,42 @@ def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resu
     subprocess.run([sys.executable, "-m", "hersd.engine.cli", *args], check=True, capture_output=True)
     reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
+
+
+class _Loading(types.ModuleType):
+    """A module whose names are never there: a Ctrl-C while it loads (torch, under hersd.engine.train)."""
+
+    def __getattr__(self, name: str):
+        raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("where", ["composing", "loading torch"])
+def test_ctrl_c_before_training_begins_is_one_line_with_exit_130(tmp_path, capsys, monkeypatch, where):
+    import hersd.contract.compose
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    if where == "composing":
+        monkeypatch.setattr(hersd.contract.compose, "compose", interrupted)
+    else:
+        monkeypatch.setitem(sys.modules, "hersd.engine.train", _Loading("hersd.engine.train"))
+    try:
+        main([*TINY, f"results_dir={tmp_path}"])
+    except SystemExit as exited:
+        code = exited.code
+    except KeyboardInterrupt:
+        code = "a KeyboardInterrupt's traceback"
+    assert code == 130
+    assert capsys.readouterr().err == ("hersd-train: interrupted before training began; re-run the same command "
+                                       "to start\n")
+
+
+def test_the_commands_module_loads_only_the_standard_library_so_ctrl_c_is_caught_from_its_start():
+    code = ("import sys, hersd.engine.cli; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'numpy', 'pandas', 'omegaconf', 'hydra', 'torch', 'mujoco', 'mcap'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]"
 
 
 def _stopped_after_epoch_1(tmp_path: Path) -> tuple[list[str], Path]:
