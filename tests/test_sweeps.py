@@ -176,6 +176,14 @@ def test_checking_runs_that_need_nothing_of_the_machine_loads_no_torch():
     assert out.stdout.strip() == "False"
 
 
+def test_the_commands_module_loads_no_library_so_ctrl_c_is_caught_from_its_start():
+    """The modules a sweep needs load inside main's Ctrl-C handling: a Ctrl-C while they load is one line."""
+    code = ("import sys, sweeps.launch; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'numpy', 'pandas', 'omegaconf', 'hydra', 'torch', 'mcap'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]"
+
+
 def test_a_joblib_launcher_of_ones_own_without_n_jobs_is_told_what_to_set():
     """The joblib plugin's default n_jobs, -1, is refused with the setting that gives one run per core."""
     from hydra_plugins.hydra_joblib_launcher.config import JobLibLauncherConf
