@@ -33,6 +33,7 @@ import argparse
 import base64
 import html
 import io
+import os
 import shutil
 import sys
 import time
@@ -492,7 +493,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     if window < 1:
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
     folder = Path(folder)
-    out = Path(out) if out is not None else folder / "report"
+    out = _checked_out(Path(out) if out is not None else folder / "report")
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
@@ -536,6 +537,21 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
                                 animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
+
+
+def _checked_out(out: Path) -> Path:
+    """``out``, or ReportInputError if the report cannot be written into it: a path that is a file or passes
+    through one, or under a folder that is not writable; checked before any log is read."""
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ReportInputError(f"cannot write the report to {out}: {existing} is a file, not a folder; "
+                               f"give --out a folder (it is created if missing)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ReportInputError(f"cannot write the report to {out}: {existing} is not writable; "
+                               f"give --out a folder you can write to")
+    return out
 
 
 def _is_report(out: Path) -> bool:

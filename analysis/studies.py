@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
+from urllib.parse import quote
 
 from hersd.contract.study import DRIVER_HINTS, StudyStorageError, connect_args, one_line, storage_file, storage_location, \
     storage_name, with_driver
@@ -94,7 +95,8 @@ def _read_only_engine(location: str, name: str) -> tuple[Any, dict[str, Any]]:
         raise StudyStorageError(f"{name}: not a storage URL ({one_line(err)})") from None
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         path = Path(url.database.removeprefix("file:")).resolve()
-        url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
+        url = url.set(database=f"file:{quote(str(path), safe='/')}",  # a URI: '#', '%', '?' quoted
+                      query={"mode": "ro", "uri": "true"})
     options = {"connect_args": args} if (args := connect_args(url, read_only=True)) else {}
     try:
         return sqlalchemy.create_engine(url, **options), options

@@ -18,18 +18,14 @@ import sys
 import time
 import traceback
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-from omegaconf import DictConfig
-
-from hersd.contract.compose import CONFIG_PATH, explain_config_error, group_choices, group_options, null_group
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import typed_instead
-from hersd.contract.cores import available_cores, resolve_threads
-from hersd.contract.runstore import RunFolder, RunLockedError, check_writable, run_dir
-from sweeps.hydra_private import job_error
-from sweeps.plan import SweepConfig, SweepError, job_train_config, plan_runs, register_schemas
-from sweeps.status import run_status, time_to_go
+from hersd.contract.cores import resolve_threads
+
+if TYPE_CHECKING:  # the rest loads in the functions, inside main's Ctrl-C handling (the module loads in ~0.1 s)
+    from omegaconf import DictConfig
 
 PROGRESS_NAME = "progress.jsonl"
 PLAN_NAME = "sweep.json"
@@ -42,7 +38,7 @@ _hydra_full_error = "0"  # the user's HYDRA_FULL_ERROR ("1": tracebacks), restor
 # None: its jobs run elsewhere, each on its own allocation, and resolve threads=auto there.
 RUNS_AT_ONCE: tuple[tuple[str, Callable[[Any, int], int | None]], ...] = (
     ("partition", lambda partition, n_runs: None),  # a cluster's queue (submitit's SLURM)
-    ("n_jobs", lambda n_jobs, n_runs: int(n_jobs)),  # joblib (1 or more: check_launcher)
+    ("n_jobs", lambda n_jobs, n_runs: int(n_jobs)),  # joblib (1 or more: sweeps.launchers.check_launcher)
     ("array_parallelism", lambda at_most, n_runs: int(at_most or n_runs)),  # an executor's cap
     ("tasks_per_node", lambda tasks, n_runs: n_runs),  # an executor that starts every job (submitit's local)
 )  # none of them (Hydra's basic launcher): one after another
@@ -66,6 +62,10 @@ def with_threads(job: list[str], threads: int) -> list[str]:
 # --------------------------------------------------------------------------- in the sweeping process
 def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
+    from hersd.contract.runstore import RunFolder, check_writable
+    from sweeps.launchers import check_launcher
+    from sweeps.plan import SweepConfig, SweepError, plan_runs
+
     global _composed
     _composed = True
     os.environ["HYDRA_FULL_ERROR"] = _hydra_full_error  # composed: Hydra reports the rest as the user set it
@@ -74,7 +74,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     except ConfigError as err:                         # is valid, though the base's constant has no beta1)
         raise SweepError(str(err), exit_code=2) from None
     sweep_threads = sweeper.config.threads
-    check_launcher(sweeper.config.hydra.launcher)
+    check_launcher(sweeper.config.hydra.launcher, submits=not sweeper.dry_run)
     planned = plan_runs(sweeper, arguments)
     states = {directory: RunFolder(directory).state() for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
@@ -108,6 +108,7 @@ def list_runs(planned: dict, at_once: int | None) -> None:
     """The dry run's listing: one line per run, in launch order, with its state (:mod:`sweeps.status`),
     directory, progress and job; then the runs training now with their pids, and what is left
     (:func:`sweeps.status.time_to_go`; ``at_once``: runs sharing this machine, None on a cluster)."""
+    from sweeps.status import run_status, time_to_go
     statuses = []
     for directory, run in planned.items():
         status = run_status(directory, run.epochs)
@@ -125,24 +126,13 @@ def check_machine_here(machines: set[tuple[str, str]]) -> None:
     """SweepError (exit 2) if this machine cannot train a run of one of these (device, precision) pairs,
     e.g. ``precision=bf16`` on a CPU without bf16 instructions (:func:`hersd.engine.resources.check_machine`)."""
     from hersd.engine.resources import check_machine  # torch: only for a sweep that trains here
+    from sweeps.plan import SweepError
 
     for device, precision in sorted(machines):
         try:
             check_machine(device, precision)
         except ConfigError as err:
             raise SweepError(str(err), exit_code=2) from None
-
-
-def check_launcher(launcher: DictConfig) -> None:
-    """A launcher's ``n_jobs`` (runs at once on this machine, which threads=auto divides the cores by) must be 1
-    or more (SweepError, exit 2): joblib's counts below 1 (its plugin's default, -1) are refused, not guessed."""
-    if "n_jobs" not in launcher:
-        return
-    n_jobs = launcher.get("n_jobs")
-    if not isinstance(n_jobs, int) or n_jobs < 1:
-        raise SweepError(f"hydra.launcher.n_jobs={n_jobs}: give the number of runs to train at once, 1 or more, "
-                         f"or ${{hersd_cores:}} for one per core ({available_cores()} here, the default of "
-                         "hydra/launcher=local)", exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
@@ -155,6 +145,7 @@ def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
 
 def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
     """Launch the jobs -> their results; a submitit job that died or was cut short is a SweepError."""
+    from sweeps.plan import SweepError
     try:
         return sweeper.launcher.launch(jobs, initial_job_idx=0)
     except Exception as err:  # noqa: BLE001 - only submitit's job errors are translated
@@ -171,6 +162,9 @@ def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
 def report_outcomes(jobs: list[list[str]], results: list, skipped: int) -> None:
     """Print how each launched run ended; raise (exit code 1) if any failed."""
     from hydra.core.utils import JobStatus
+
+    from sweeps.hydra_private import job_error
+    from sweeps.plan import SweepError
 
     outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": []}
     for job, result in zip(jobs, results):
@@ -195,7 +189,9 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     """Train one run of the sweep; never raises, so one failure does not stop the others."""
     from hydra.core.hydra_config import HydraConfig
 
+    from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
     from hersd.engine.train import train
+    from sweeps.plan import job_train_config
 
     hydra_cfg = HydraConfig.get()
     train_cfg = job_train_config(cfg)
@@ -234,11 +230,13 @@ def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -
 
 def launcher_options() -> list[str]:
     """The hydra/launcher options: hersd's YAMLs (conf/hydra/launcher) and submitit's own local one."""
+    from hersd.contract.compose import group_options
     return [*group_options("hydra/launcher"), "submitit_local"]
 
 
 def usage() -> str:
     """``hersd-sweep --help``: the command, its groups (those a sweep takes) and keys."""
+    from hersd.contract.compose import group_choices
     groups = [f"  {'+grid' if group == 'grid' else group}={'|'.join(group_choices(group))}"
               for group in ("grid", "task", "algo", "schedule", "learner")]
     return "\n".join([
@@ -262,27 +260,30 @@ def usage() -> str:
 
 def main() -> None:
     """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs; an
-    interrupt (Ctrl-C) ends with one line and exit code 130; a command line that does not compose, with one
-    line and exit code 2 (the traceback with ``HYDRA_FULL_ERROR=1``)."""
+    interrupt (Ctrl-C) ends with one line and exit code 130, from the start (the modules load in here); a command
+    line that does not compose, with one line and exit code 2 (the traceback with ``HYDRA_FULL_ERROR=1``)."""
     global _hydra_full_error
-    import hydra
-
-    if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
-        print(usage())
-        return
-    if "--dry-run" in sys.argv:
-        signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # a listing: a reader gone (``| head``) ends it quietly
-        sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
-    for arg in sys.argv[1:]:  # a class by its path is no config of the group: one line saying what selects it
-        key, _, value = arg.partition("=")
-        if key.lstrip("+") == "learner" and (instead := typed_instead(value)):
-            print(f"hersd-sweep: error: {arg} names a class, which no config of the learner group holds; "
-                  f"type {instead}", file=sys.stderr)
-            sys.exit(2)
-    register_schemas()
-    _hydra_full_error = os.environ.get("HYDRA_FULL_ERROR", "0")
-    os.environ["HYDRA_FULL_ERROR"] = "1"  # a composition error reaches the except below; sweep_runs restores it
     try:
+        import hydra
+
+        from hersd.contract.compose import CONFIG_PATH, explain_config_error, null_group
+        from sweeps.plan import register_schemas
+
+        if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
+            print(usage())
+            return
+        if "--dry-run" in sys.argv:
+            signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # a listing: a reader gone (``| head``) ends it quietly
+            sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]
+        for arg in sys.argv[1:]:  # a class by its path is no config of the group: one line saying what selects it
+            key, _, value = arg.partition("=")
+            if key.lstrip("+") == "learner" and (instead := typed_instead(value)):
+                print(f"hersd-sweep: error: {arg} names a class, which no config of the learner group holds; "
+                      f"type {instead}", file=sys.stderr)
+                sys.exit(2)
+        register_schemas()
+        _hydra_full_error = os.environ.get("HYDRA_FULL_ERROR", "0")
+        os.environ["HYDRA_FULL_ERROR"] = "1"  # a composition error reaches the except below; sweep_runs restores it
         if said := null_group(sys.argv[1:]):
             raise ConfigError(said)
         hydra.main(config_path=CONFIG_PATH, config_name="sweep", version_base="1.3")(run_job)()
@@ -296,4 +297,3 @@ def main() -> None:
         said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
         print(f"hersd-sweep: error: {'+' if said.startswith('grid=') else ''}{said}", file=sys.stderr)
         sys.exit(2)
-

@@ -46,6 +46,15 @@ def test_bad_options_are_one_line_errors(hand_sized, capsys, tmp_path, arguments
     assert err.count("\n") == 1 and message in err
 
 
+@pytest.mark.parametrize("out", ["a_file", "a_file/report"])
+def test_an_out_that_is_or_passes_through_a_file_is_one_line_error_exit_2(hand_sized, capsys, tmp_path, out):
+    (tmp_path / "a_file").write_text("mine")
+    assert exit_status([str(hand_sized), "--out", str(tmp_path / out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a file, not a folder; give --out a folder" in err
+    assert (tmp_path / "a_file").read_text() == "mine"
+
+
 def test_report_writes_tables_figures_and_self_contained_html(sweep, tmp_path, capsys):
     out = tmp_path / "report"
     assert report_main([str(sweep), "--out", str(out), "--smooth", "3"]) == 0

@@ -48,7 +48,8 @@ def test_every_search_config_composes_and_plans(name: str, tmp_path: Path) -> No
     ("search.first_seed=-1", "search.first_seed must be >= 0, got -1"),
     ("search.stale_after_minutes=0", "search.stale_after_minutes must be > 0"),
     ("search.stale_after_minutes=nan", "search.stale_after_minutes must be > 0"),
-    ("search.sampler.seed=-1", "search.sampler.seed must be >= 0, got -1"),
+    ("search.sampler.seed=-1", "search.sampler.seed must be >= 0 and < 2**32 (4294967296), got -1"),
+    ("search.sampler.seed=4294967296", "search.sampler.seed must be >= 0 and < 2**32 (4294967296), got 4294967296"),
     ("search.enqueue=[{beta1: abc}]", "search.enqueue[0].beta1 must be a finite number, got 'abc'"),
     ("search.enqueue=[{beta1: true}]", "search.enqueue[0].beta1 must be a finite number, got True"),
     ("search.enqueue=[{beta1: 2}]", "search.enqueue[0]: schedule.beta1 must be a number in [0, 1], got 2.0"),
@@ -59,6 +60,7 @@ def test_every_search_config_composes_and_plans(name: str, tmp_path: Path) -> No
     ("search.storage=sqlite://", "search.storage: an in-memory SQLite database"),
     ("search.storage=", "search.storage is empty"),
     ("search.storage=journal:", "search.storage=journal:<path> needs a file path"),
+    ("search.storage=sqlite:///x.db?mode=ro", "quote it: 'search.storage=\"sqlite:///x.db?mode=ro\"'"),
     ("search=nope", "search=nope is not a known search; choose one of: ci, default, wide"),
     ("results_dir=/proc/no-such-dir", "results_dir: cannot write to /proc/no-such-dir"),
     # training overrides Hydra refuses: one line, as hersd-train says them

@@ -54,3 +54,22 @@ def test_sqlite_workers_never_claim_one_enqueued_trial_twice(tmp_path: Path) -> 
     numbers = Path(calls).read_text().split()
     assert [process.exitcode for process in processes] == [0, 0]
     assert len(numbers) == len(set(numbers)) == 40
+
+
+def test_a_journal_whose_last_record_is_cut_is_refused_with_the_command_that_cuts_it_off(tmp_path: Path,
+                                                                                       capsys) -> None:
+    journal = tmp_path / "study.log"
+    optuna.create_study(study_name="cut", storage=open_storage(f"journal:{journal}")).enqueue_trial({"x": 0.5})
+    whole = journal.stat().st_size
+    with open(journal, "rb+") as file:
+        file.truncate(whole - 5)  # the last record's end lost: a writer killed mid-record
+    before = journal.read_bytes()
+    err = fails_with([f"search.storage=journal:{journal}", *tiny_search(tmp_path)], capsys)
+    assert f"the last record of the journal {journal} is cut" in err
+    size = int(err.split("truncate -s ")[1].split()[0])
+    assert journal.read_bytes() == before and before[size - 1:size] == b"\n" and b"\n" not in before[size:]
+    with open(journal, "rb+") as file:  # the fix the line gives: the whole records stay readable and writable
+        file.truncate(size)
+    study = optuna.load_study(study_name="cut", storage=open_storage(f"journal:{journal}"))
+    study.enqueue_trial({"x": 0.25})
+    assert len(optuna.load_study(study_name="cut", storage=open_storage(f"journal:{journal}")).trials) == 1  # the new one

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from pathlib import Path
@@ -14,6 +15,7 @@ import hersd.engine.train
 from hersd.contract.cores import available_cores
 from sweeps.search import cli, plan as search_plan, workers
 from sweeps.search.config import SlurmConfig
+from sweeps.search.storage import open_storage
 
 
 def test_slurm_settings_come_from_the_packaged_preset_and_search_slurm() -> None:
@@ -92,3 +94,53 @@ def test_slurm_workers_run_as_submitit_jobs_each_on_its_whole_allocation(tmp_pat
     assert shared_by == [[1, 1]]  # no job shares its allocation with another's runs
     for trial in study.trials:
         assert 1 <= run_meta(trial.user_attrs["run_dirs"][0])["threads"] <= available_cores()
+
+
+def _interrupted_search(tmp_path: Path, capfd) -> list[str]:
+    """hersd-search (one worker, in its own process) stopped by a Ctrl-C -> its stderr lines, and Optuna's log
+    lines however its handler writes (asserting exit code 130)."""
+    logged: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = logged.append
+    logging.getLogger("optuna").addHandler(handler)
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main(["search.n_trials=2", "search.pruner.kind=none", *tiny_search(tmp_path, epochs=2)])
+    finally:
+        logging.getLogger("optuna").removeHandler(handler)
+    assert exit_info.value.code == 130
+    lines = capfd.readouterr().err.splitlines() + [record.getMessage() for record in logged]
+    return [line for line in dict.fromkeys(lines) if "A new study created" not in line]
+
+
+def test_ctrl_c_in_training_is_one_line_without_optunas_traceback(tmp_path: Path, capfd, monkeypatch) -> None:
+    def interrupted(cfg, command="", on_epoch=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(hersd.engine.train, "train", interrupted)
+    assert _interrupted_search(tmp_path, capfd) == ["hersd-search: interrupted; re-run the same command to resume"]
+    (trial,) = [trial for trial in load(only_db(tmp_path)).trials if trial.state != TrialState.WAITING]
+    assert trial.state == TrialState.FAIL and trial.user_attrs["interrupted"]  # recorded as interrupted
+
+
+def test_ctrl_c_in_optunas_bookkeeping_is_one_line(tmp_path: Path, capfd, monkeypatch) -> None:
+    """A Ctrl-C while Optuna records a trial's end makes Optuna fail with another error raised while handling
+    it (UnboundLocalError in optuna 4-5); that is the Ctrl-C too, and the trial is left to be re-run as lost."""
+    def crash(cfg, command="", on_epoch=None):
+        raise RuntimeError("simulated crash")
+
+    def interrupting_storage(spec: str):
+        storage = open_storage(spec)
+        real = storage.set_trial_state_values
+
+        def set_state(trial_id, state, values=None):
+            if state != TrialState.RUNNING:
+                raise KeyboardInterrupt
+            return real(trial_id, state, values)
+
+        storage.set_trial_state_values = set_state
+        return storage
+
+    monkeypatch.setattr(hersd.engine.train, "train", crash)
+    monkeypatch.setattr(workers, "open_storage", interrupting_storage)
+    assert _interrupted_search(tmp_path, capfd) == ["hersd-search: interrupted; re-run the same command to resume"]

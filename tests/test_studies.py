@@ -65,3 +65,16 @@ def test_storages_are_opened_read_only(storages):
     with pytest.raises(StudyStorageError):  # refused before Optuna could create its tables
         open_study_storage(storages / "plain.db")
     assert _files(storages) == before  # not a byte, not a time stamp, no new file (no -journal, -wal, .lock)
+
+
+def test_a_default_storage_under_a_folder_named_with_hash_percent_and_question_mark_is_created_and_found(tmp_path):
+    import optuna
+
+    from hersd.contract.study import default_storage, find_study_storages
+    from sweeps.search.storage import open_storage
+
+    results = tmp_path / "a#b%41c?d"  # '#' a URL fragment, '%41' an escaped 'A', '?' a query in an unquoted URL
+    optuna.create_study(study_name="s", storage=open_storage(default_storage(results, "s")))
+    assert [path.name for path in find_study_storages(results)] == ["s.db"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["a#b%41c?d"]  # no database beside it
+    assert [open_study_storage(path).study_names for path in find_study_storages(results)] == [["s"]]

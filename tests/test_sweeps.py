@@ -118,6 +118,26 @@ def test_no_runs_at_once_is_one_line_saying_what_to_do_and_exit_2(tmp_path, n_jo
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("sinfo, override, message", [
+    ("printf 'debug*\\ncpu\\n'", "hydra.launcher.partition=nope",
+     "hydra.launcher.partition=nope: no partition nope here; choose among: debug, cpu"),
+    ("echo 'sinfo: fatal: no controller' >&2; exit 1", "hydra.launcher.partition=debug",
+     "hydra/launcher=slurm: SLURM does not answer here (sinfo: fatal: no controller)"),
+    ("printf 'debug*\\n'", "hydra.launcher.mem_gb=-1", "hydra.launcher.mem_gb=-1: give the GB of memory of each job"),
+    ("printf 'debug*\\n'", "hydra.launcher.timeout_min=0", "hydra.launcher.timeout_min=0: give the minutes of each job"),
+    ("printf 'debug*\\n'", "hydra.launcher.cpus_per_task=0", "hydra.launcher.cpus_per_task=0: give the CPUs of each job"),
+])
+def test_slurm_problems_stop_the_sweep_at_start_as_they_stop_a_search(tmp_path, monkeypatch, sinfo, override, message):
+    (tmp_path / "bin").mkdir()
+    (tmp_path / "bin" / "sinfo").write_text(f"#!/bin/sh\n{sinfo}\n")
+    (tmp_path / "bin" / "sinfo").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}:{os.environ['PATH']}")
+    results = tmp_path / "results"
+    result = sweep("+grid=smoke", "hydra/launcher=slurm", override, f"results_dir={results}", check=False)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"hersd-sweep: error: {message}") and not results.exists()
+
+
 def test_a_run_this_machine_cannot_train_is_refused_before_any_run_unless_the_runs_train_elsewhere(tmp_path):
     """A sweep training here checks what its runs ask of the machine first (one line, exit 2, dry run too);
     one whose jobs run on a cluster's nodes lists them: the nodes decide."""
@@ -156,12 +176,20 @@ def test_checking_runs_that_need_nothing_of_the_machine_loads_no_torch():
     assert out.stdout.strip() == "False"
 
 
+def test_the_commands_module_loads_no_library_so_ctrl_c_is_caught_from_its_start():
+    """The modules a sweep needs load inside main's Ctrl-C handling: a Ctrl-C while they load is one line."""
+    code = ("import sys, sweeps.launch; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'numpy', 'pandas', 'omegaconf', 'hydra', 'torch', 'mcap'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]"
+
+
 def test_a_joblib_launcher_of_ones_own_without_n_jobs_is_told_what_to_set():
     """The joblib plugin's default n_jobs, -1, is refused with the setting that gives one run per core."""
     from hydra_plugins.hydra_joblib_launcher.config import JobLibLauncherConf
     from omegaconf import OmegaConf
 
-    from sweeps.launch import check_launcher
+    from sweeps.launchers import check_launcher
     from sweeps.plan import SweepError
 
     with pytest.raises(SweepError) as refused:

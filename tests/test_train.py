@@ -1,9 +1,11 @@
 """The training run end to end: determinism, resume, the log contract, bad input, learning."""
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -130,6 +132,42 @@ def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resu
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 
 
+class _Loading(types.ModuleType):
+    """A module whose names are never there: a Ctrl-C while it loads (torch, under hersd.engine.train)."""
+
+    def __getattr__(self, name: str):
+        raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("where", ["composing", "loading torch"])
+def test_ctrl_c_before_training_begins_is_one_line_with_exit_130(tmp_path, capsys, monkeypatch, where):
+    import hersd.contract.compose
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    if where == "composing":
+        monkeypatch.setattr(hersd.contract.compose, "compose", interrupted)
+    else:
+        monkeypatch.setitem(sys.modules, "hersd.engine.train", _Loading("hersd.engine.train"))
+    try:
+        main([*TINY, f"results_dir={tmp_path}"])
+    except SystemExit as exited:
+        code = exited.code
+    except KeyboardInterrupt:
+        code = "a KeyboardInterrupt's traceback"
+    assert code == 130
+    assert capsys.readouterr().err == ("hersd-train: interrupted before training began; re-run the same command "
+                                       "to start\n")
+
+
+def test_the_commands_module_loads_only_the_standard_library_so_ctrl_c_is_caught_from_its_start():
+    code = ("import sys, hersd.engine.cli; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'numpy', 'pandas', 'omegaconf', 'hydra', 'torch', 'mujoco', 'mcap'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]"
+
+
 def _stopped_after_epoch_1(tmp_path: Path) -> tuple[list[str], Path]:
     """A run of 3 epochs stopped after epoch 1 (log + checkpoint on disk) -> (its args, its directory)."""
     args = [*TINY, "epochs=3", f"results_dir={tmp_path}"]
@@ -241,6 +279,17 @@ def test_unknown_choice_lists_the_valid_ones(tmp_path, capsys):
     assert "pick_and_place, push, reach, slide" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("value", ["/tmp/é", "a#b", "it's#"])  # Hydra's grammar reads none of these unquoted
+def test_a_value_hydras_grammar_cannot_read_is_one_line_saying_how_to_quote_it(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as exit_info:
+        main([f"results_dir={value}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cannot read this value unquoted; quote it: " in err, err
+    typed = shlex.split(err.split("quote it: ")[1])  # as the shell hands it over
+    assert compose(typed).results_dir == value
+
+
 def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
@@ -250,6 +299,17 @@ def test_unwritable_results_dir_fails_before_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "results_dir" in err and len(err.strip().splitlines()) == 1
     assert blocker.read_text() == "not a folder"
+
+
+def test_a_file_where_the_run_folder_goes_under_results_dir_is_one_line_with_exit_2(tmp_path, capsys):
+    blocker = tmp_path / "reach"  # where <results_dir>/<task>/... goes
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, "task=reach", f"results_dir={tmp_path}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"hersd-train: error: results_dir: {blocker} is a file"), err
+    assert err.endswith("pass results_dir=<another folder>") and blocker.read_text() == "not a folder"
 
 
 @pytest.mark.parametrize("inside", ["", "run"])

@@ -104,13 +104,35 @@ def null_group(overrides: list[str]) -> str | None:
     return None
 
 
+def quoted_override(override: str) -> str | None:
+    """An override Hydra's grammar cannot parse (``results_dir=/data/é``, ``search.storage=sqlite:///x.db?mode=ro``)
+    with its value quoted as typed in a shell (``'results_dir="/data/é"'``), if Hydra parses that to the same key
+    and value; else None (the key is the trouble, or the value holds both kinds of quotes)."""
+    import shlex
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    key, equals, value = override.partition("=")
+    quote = '"' if '"' not in value else "'"
+    if not equals or not value or quote in value:
+        return None
+    try:
+        parsed = OverridesParser.create().parse_override(f"{key}={quote}{value}{quote}")
+    except HydraException:
+        return None
+    return shlex.quote(f"{key}={quote}{value}{quote}") if parsed.value() == value else None
+
+
 def explain_config_error(err: Exception, what: str = "config field", see: str = "hersd-train --help") -> str:
     """Hydra/OmegaConf composition errors -> one line naming the field and the choices."""
-    from hydra.errors import MissingConfigException
+    from hydra.errors import MissingConfigException, OverrideParseException
     from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
 
     if isinstance(err, ConfigError):
         return str(err)
+    if isinstance(err, OverrideParseException) and (quoted := quoted_override(err.override)):
+        return f"{err.override}: Hydra's override grammar cannot read this value unquoted; quote it: {quoted}"
     if isinstance(err, MissingConfigException) and err.missing_cfg_file:
         group, _, value = err.missing_cfg_file.rpartition("/")  # a nested group too: hydra/launcher=<value>
         if not group:

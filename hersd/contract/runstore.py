@@ -194,3 +194,14 @@ def check_writable(directory: Path, key: str = "results_dir") -> None:
     except OSError as err:
         raise ConfigError(f"{key}: cannot write to {directory} ({err.strerror}); "
                           f"pass {key}=<a writable folder>") from None
+
+
+def check_run_path(directory: Path, top: Path, key: str = "results_dir") -> None:
+    """Fail early (ConfigError naming ``key``) if a file stands where a folder between ``top`` (checked by
+    :func:`check_writable`) and the run's folder ``directory`` below it goes (e.g. ``<results_dir>/reach``)."""
+    folder = top
+    for part in directory.relative_to(top).parts:
+        folder = folder / part
+        if folder.exists() and not folder.is_dir():
+            raise ConfigError(f"{key}: {folder} is a file, where the run's folder {directory} goes; "
+                              f"move that file away or pass {key}=<another folder>")

@@ -21,6 +21,7 @@ import importlib.util
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote, unquote
 
 from hersd.contract.config import TrainConfig
 from hersd.contract.errors import ConfigError
@@ -72,15 +73,24 @@ def storage_location(spec: str) -> tuple[str, str]:
     if "://" in spec:
         return "rdb", spec
     path = Path(spec).expanduser()
-    return ("journal", str(path)) if path.suffix in JOURNAL_SUFFIXES else ("rdb", f"{SQLITE_PREFIX}{path}")
+    return ("journal", str(path)) if path.suffix in JOURNAL_SUFFIXES else ("rdb", sqlite_url(path))
+
+
+def sqlite_url(path: str | Path) -> str:
+    """``sqlite:///<path>``, the path percent-quoted as SQLAlchemy reads a URL's database (``sqlalchemy.make_url``
+    unquotes it), so a folder named with ``#``, ``%`` or ``?`` is that folder; an ordinary path is unchanged.
+    SQLAlchemy's ``URL.create(drivername="sqlite", database=path)`` renders the same; this module imports no
+    SQLAlchemy (tests/test_layers.py)."""
+    return f"{SQLITE_PREFIX}{quote(str(path), safe='/')}"
 
 
 def storage_file(spec: str) -> Path | None:
-    """The journal or SQLite file a storage spec names, absolute; None for a database server."""
+    """The journal or SQLite file a storage spec names, absolute; None for a database server. A SQLite URL's
+    path is unquoted, as SQLAlchemy opens it (``%23`` is ``#``)."""
     kind, location = storage_location(spec)
     if kind == "rdb" and not location.startswith(SQLITE_PREFIX):
         return None
-    return Path(location.removeprefix(SQLITE_PREFIX).partition("?")[0]).resolve()
+    return Path(unquote(location.removeprefix(SQLITE_PREFIX).partition("?")[0])).resolve()
 
 
 def shown(url: str) -> str:
@@ -101,7 +111,7 @@ def storage_name(spec: str) -> str:
 
 def default_storage(results_dir: str | Path, study_name: str) -> str:
     """The storage of a study without ``search.storage``: ``sqlite:///<results_dir>/search/<study>.db``."""
-    return f"{SQLITE_PREFIX}{Path(results_dir).resolve() / SEARCH_FOLDER / study_name}.db"
+    return sqlite_url(f"{Path(results_dir).resolve() / SEARCH_FOLDER / study_name}.db")
 
 
 def find_study_storages(folder: str | Path) -> list[Path]:

@@ -5,6 +5,10 @@ the same command resumes an interrupted run. ``--help`` is generated from the sc
 (:mod:`hersd.contract.config`, each field's comment), the config groups under ``conf/`` and each schedule class
 (the registered kinds, and a class of your own the command names: ``schedule._target_=<module>.<Class> --help``),
 and a learner the command names beyond the package's (``learner._target_=<module>.<Class> --help``).
+
+This module imports only the standard library and the contract's errors at its top; each function imports the
+contract modules it uses (pandas, OmegaConf and Hydra among them), so a Ctrl-C while they load is inside
+:func:`main`'s handling: one line, exit code 130, from the command's first moment.
 """
 
 from __future__ import annotations
@@ -14,13 +18,12 @@ import inspect
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from hersd.contract.compose import compose_train, explain_config_error, group_choices
-from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig, learner_key, learner_settings_class
 from hersd.contract.errors import ConfigError
-from hersd.contract.schedules import TARGET_KEY, kind_name, known_kinds, schedule_class
-from hersd.contract.runstore import RunLockedError, check_writable, run_dir
+
+if TYPE_CHECKING:
+    from hersd.contract.config import TrainConfig
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
 HELP_FLAGS = ("-h", "--help")
@@ -58,6 +61,9 @@ def _own_field_docs(schema: type) -> dict[str, str]:
 
 def schema_lines(schema: type, prefix: str = "") -> list[str]:
     """``key=default  doc`` for every field of a dataclass schema, nested ones flattened with dots."""
+    from hersd.contract.config import PACKAGE_LEARNERS
+    from hersd.contract.schedules import TARGET_KEY
+
     docs = field_docs(schema)
     lines = []
     defaults = schema()
@@ -81,6 +87,8 @@ def schema_lines(schema: type, prefix: str = "") -> list[str]:
 def schedule_lines(chosen: list[str] = ()) -> list[str]:
     """Each schedule kind's formula, then its settings (``schedule.<name>=default  doc``), as its class declares
     them; after the registered kinds, the classes ``chosen`` by path (``schedule._target_=<module>.<Class>``)."""
+    from hersd.contract.schedules import known_kinds, schedule_class
+
     lines = []
     for kind in [*known_kinds(), *(path for path in chosen if path not in known_kinds())]:
         cls = schedule_class(kind)
@@ -94,6 +102,9 @@ def schedule_lines(chosen: list[str] = ()) -> list[str]:
 def chosen_schedules(argv: list[str]) -> list[str]:
     """The schedule classes a command line names by ``schedule._target_=`` or ``schedule.kind=``, or by a preset
     of one's own (``schedule=step`` in a ``hydra.searchpath`` folder): the class the composed config holds."""
+    from hersd.contract.compose import group_choices
+    from hersd.contract.schedules import TARGET_KEY, kind_name
+
     keys = (f"schedule.{TARGET_KEY}", "schedule.kind")
     named = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys]
     presets = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0] == "schedule"]
@@ -106,6 +117,8 @@ def composed(argv: list[str]) -> TrainConfig:
     """The run config of a --help command line (less the flag); ConfigError (one line) if it does not compose."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
+
+    from hersd.contract.compose import compose_train, explain_config_error
 
     try:
         return compose_train([arg for arg in argv if arg not in HELP_FLAGS])
@@ -122,6 +135,8 @@ def searched_folders(argv: list[str]) -> list[Path]:
 
 def choices(group: str, argv: list[str]) -> list[str]:
     """A group's choices: the package's (:func:`group_choices`), and the configs of the searched folders."""
+    from hersd.contract.compose import group_choices
+
     own = [path.stem for folder in searched_folders(argv) for path in (folder / group).glob("*.yaml")]
     return sorted({*group_choices(group), *own})
 
@@ -129,6 +144,10 @@ def choices(group: str, argv: list[str]) -> list[str]:
 def learner_lines(argv: list[str]) -> list[str]:
     """The settings (``learner.<key>.<field>=default  doc``) of each learner the command line names
     (``learner=``, ``learner.name=``, ``learner._target_=``) beyond the package's, whose settings the keys list."""
+    from hersd.contract.compose import group_choices
+    from hersd.contract.config import PACKAGE_LEARNERS, learner_key, learner_settings_class
+    from hersd.contract.schedules import TARGET_KEY
+
     keys = ("learner", "learner.name", f"learner.{TARGET_KEY}")
     named = [name for arg in argv if arg.split("=", 1)[0].lstrip("+") in keys for name in arg.split("=", 1)[1].split(",")]
     presets = [arg.split("=", 1)[1] for arg in argv if arg.split("=", 1)[0] == "learner"]
@@ -148,6 +167,8 @@ def usage(argv: list[str] = ()) -> str:
     """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
     with the package's kinds, and a learner it names beyond the package's with its settings (ConfigError if
     either cannot be found)."""
+    from hersd.contract.config import TrainConfig
+
     groups = [f"  {group}={'|'.join(choices(group, argv))}" for group in GROUPS]
     return "\n".join([
         "usage: hersd-train [KEY=VALUE ...]", "",
@@ -168,33 +189,49 @@ def _fail(message: str, code: int = 2) -> None:
     sys.exit(code)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
-    losses turn NaN or infinite with one line and exit code 1, an interrupt (Ctrl-C) with one line
-    and exit code 130."""
+def checked_config(argv: list[str]) -> TrainConfig:
+    """The run config of a command line, its folders checked (created, writable, no file where the run's folder
+    goes); bad input ends the command with one line and exit code 2."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    argv = sys.argv[1:] if argv is None else argv
-    if any(arg in HELP_FLAGS for arg in argv):
-        try:
-            print(usage(argv))
-        except ConfigError as err:
-            _fail(str(err))
-        return
+    from hersd.contract.compose import compose_train, explain_config_error
+    from hersd.contract.runstore import check_run_path, check_writable, run_dir
+
     try:
         cfg = compose_train(argv)
         if cfg.run_dir is None:
             check_writable(Path(cfg.results_dir))
+            check_run_path(run_dir(cfg), Path(cfg.results_dir))
         else:
             check_writable(Path(cfg.run_dir), "run_dir")
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
         _fail(explain_config_error(err))
-    from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
-    from hersd.engine.train import NonFiniteLossError, RunStateError, train
+    return cfg
 
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
+    losses turn NaN or infinite with one line and exit code 1, an interrupt (Ctrl-C) with one line
+    and exit code 130: in training, naming the folder that keeps the finished epochs; before it (the config
+    composed, torch and MuJoCo loaded), saying so."""
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        if any(arg in HELP_FLAGS for arg in argv):
+            try:
+                print(usage(argv))
+            except ConfigError as err:
+                _fail(str(err))
+            return
+        cfg = checked_config(argv)
+        from hersd.contract.runstore import RunLockedError, run_dir
+        from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
+        from hersd.engine.train import NonFiniteLossError, RunStateError, train
+    except KeyboardInterrupt:
+        print("hersd-train: interrupted before training began; re-run the same command to start", file=sys.stderr)
+        sys.exit(130)
     try:
         check_machine(cfg.device, cfg.precision)
         log_path = train(cfg, command=" ".join(["hersd-train", *argv]))

@@ -101,7 +101,8 @@ def check_counts(search: SearchConfig) -> None:
     check(search.first_seed >= 0, f"search.first_seed must be >= 0, got {search.first_seed}")
     check(search.stale_after_minutes > 0,  # NaN fails too
           f"search.stale_after_minutes must be > 0 (longer than an epoch), got {search.stale_after_minutes}")
-    check(search.sampler.seed >= 0, f"search.sampler.seed must be >= 0, got {search.sampler.seed}")
+    check(0 <= search.sampler.seed < 2**32,  # numpy's seeds, which TPE takes
+          f"search.sampler.seed must be >= 0 and < 2**32 (4294967296), got {search.sampler.seed}")
     check(search.sampler.n_startup_trials >= 0,
           f"search.sampler.n_startup_trials must be >= 0, got {search.sampler.n_startup_trials}")
     pruner = search.pruner

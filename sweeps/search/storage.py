@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import fcntl
 import functools
+import os
+import shlex
 from pathlib import Path
 from typing import Any
 
-from hersd.contract.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, SQLITE_PREFIX, StudyStorageError, connect_args, one_line,
-                         shown, storage_file, storage_location, storage_name, with_driver)
+from hersd.contract.study import (DRIVER_HINTS, JOURNAL_PREFIX, SCHEMES, StudyStorageError, connect_args, one_line,
+                         shown, sqlite_url, storage_file, storage_location, storage_name, with_driver)
 
 SQLITE_TIMEOUT_SECONDS = 60  # how long a writer waits for SQLite's lock before failing
 
@@ -79,7 +81,7 @@ def _sqlite_storage_class() -> type:
             self.claim_lock_path = path.with_name(path.name + ".lock")
             with open(self.claim_lock_path, "a") as lock_file:
                 fcntl.flock(lock_file, fcntl.LOCK_EX)
-                super().__init__(f"{SQLITE_PREFIX}{path}",
+                super().__init__(sqlite_url(path),
                                  engine_kwargs={"connect_args": {"timeout": SQLITE_TIMEOUT_SECONDS}})
 
         def set_trial_state_values(self, trial_id: int, state: TrialState, values=None) -> bool:
@@ -107,8 +109,11 @@ def open_storage(spec: str) -> Any:
         if kind == "journal":
             from optuna.storages.journal import JournalFileBackend
 
+            _check_journal_end(path)
             return JournalStorage(JournalFileBackend(str(path)))
         return _sqlite_storage_class()(path) if path is not None else _open_database(location)
+    except StudyStorageError:  # already one line (a cut journal)
+        raise
     except OSError as err:
         raise StudyStorageError(f"search.storage: cannot open {where} ({err.strerror or one_line(err)})") from None
     except SQLAlchemyError as err:
@@ -116,6 +121,46 @@ def open_storage(spec: str) -> Any:
         raise StudyStorageError(f"search.storage: cannot reach the database at {where} ({reason})") from None
     except (RuntimeError, ValueError, KeyError) as err:  # another Optuna schema version; a damaged journal
         raise StudyStorageError(f"search.storage: cannot use {where} as an Optuna storage ({one_line(err)})") from None
+
+
+def _whole_records_size(path: Path, chunk: int = 1 << 16) -> int | None:
+    """The size of the journal at ``path`` up to its last newline if its last record is cut (the file does not end
+    in one), else None (whole, empty or missing)."""
+    if not path.is_file():
+        return None
+    with open(path, "rb") as file:
+        end = position = file.seek(0, os.SEEK_END)
+        while position > 0:
+            start = max(0, position - chunk)
+            file.seek(start)
+            read = file.read(position - start)
+            if position == end and read.endswith(b"\n"):
+                return None
+            if (newline := read.rfind(b"\n")) >= 0:
+                return start + newline + 1
+            position = start
+    return 0 if end else None
+
+
+def _check_journal_end(path: Path) -> None:
+    """StudyStorageError if the journal's last record is cut (a writer stopped mid-record): Optuna would append
+    after the partial line and could then read none of the journal. Checked under Optuna's own journal lock, so
+    a worker writing a record now is not mistaken for one cut."""
+    from optuna.storages.journal import JournalFileSymlinkLock
+
+    if not path.is_file():
+        return
+    lock = JournalFileSymlinkLock(str(path))
+    lock.acquire()
+    try:
+        size = _whole_records_size(path)
+    finally:
+        lock.release()
+    if size is not None:
+        raise StudyStorageError(f"search.storage: the last record of the journal {path} is cut (its writer stopped "
+                                f"mid-record), and a record written after it would make the journal unreadable; "
+                                f"remove that partial last line, keeping every whole record before it: truncate "
+                                f"-s {size} {shlex.quote(str(path))}; then re-run")
 
 
 def _open_database(location: str) -> Any:

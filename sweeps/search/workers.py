@@ -8,13 +8,16 @@ that run at once on them: ``len(shares)`` local workers on this machine, one per
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
+import signal
 import sys
 import threading
 import time
 from dataclasses import asdict
 from functools import partial
+from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +25,7 @@ import optuna
 
 from hersd.contract.compose import CONFIG_MODULE
 from hersd.contract.errors import ConfigError
+from sweeps.launchers import check_slurm as check_slurm_answers
 from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
@@ -39,21 +43,57 @@ def _exit_when_orphaned(parent_pid: int) -> None:
     os._exit(1)
 
 
+class QuietInterrupt(logging.Filter):
+    """Optuna's log of a trial a Ctrl-C ended (the KeyboardInterrupt's traceback, then "failed with value
+    None"), and anything it logs after, dropped: the command says the interrupt in one line."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.interrupted = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.exc_info and isinstance(record.exc_info[1], KeyboardInterrupt):
+            self.interrupted = True
+        return not self.interrupted
+
+
+def interrupted(err: BaseException | None) -> bool:
+    """Whether ``err`` is a Ctrl-C or was raised while one was handled: Optuna's bookkeeping cut by the
+    KeyboardInterrupt between trials ends in another error (the trial stays RUNNING: re-run as lost)."""
+    while err is not None:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        err = err.__context__
+    return False
+
+
 def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid: int | None = None) -> None:
-    """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores."""
+    """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores. A local
+    worker process (``parent_pid`` given) starts with SIGINT blocked (:func:`run_local`) and takes it here, where
+    a Ctrl-C ends it with exit code 130 and no traceback."""
     if parent_pid is not None:
         threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
-    threads, refusals = run_threads(plan.base, concurrent_runs), []
-    study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
-                              sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
-    stop_when_done = StopWhenDone(plan.search.n_trials)
+    quiet, handlers = QuietInterrupt(), logging.getLogger("optuna").handlers
+    for handler in handlers:
+        handler.addFilter(quiet)
+    refusals: list[str] = []
     try:
-        study.optimize(partial(objective, plan=plan, threads=threads, refusals=refusals), n_trials=n_trials,
-                       catch=(Exception,), callbacks=[stop_when_done])
-    except KeyboardInterrupt:
-        if parent_pid is None:  # in the search's own process (or a SLURM job): let it report it
+        if parent_pid is not None:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C while it started arrives now
+        study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
+                                  sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
+        study.optimize(partial(objective, plan=plan, threads=run_threads(plan.base, concurrent_runs),
+                               refusals=refusals), n_trials=n_trials, catch=(Exception,),
+                       callbacks=[StopWhenDone(plan.search.n_trials)])
+    except BaseException as err:
+        if not interrupted(err):
             raise
-        sys.exit(130)  # a worker process: the trial is recorded as interrupted; no traceback
+        if parent_pid is None:  # in the search's own process (or a SLURM job): let it report it
+            raise KeyboardInterrupt from None
+        sys.exit(130)  # a worker process: the trial is recorded as interrupted (or re-run as lost); no traceback
+    finally:
+        for handler in handlers:
+            handler.removeFilter(quiet)
     if refusals and parent_pid is None:
         raise ConfigError(refusals[0])
     if refusals:
@@ -76,15 +116,23 @@ def run_local(plan: SearchPlan, shares: list[int]) -> list[int]:
     workers = [context.Process(target=run_worker, name=f"hersd-search-{i}",
                                args=(plan, share, len(shares), os.getpid()))
                for i, share in enumerate(shares)]
-    for worker in workers:
-        worker.start()
+    # SIGINT blocked while they start: a worker is never half started, and each inherits the block (across exec)
+    # until run_worker takes the signal, so a Ctrl-C in its start-up is no traceback; a blocked one waits. The
+    # start of multiprocessing's resource tracker unblocks SIGINT: it is started first.
+    resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
+        for worker in workers:
+            worker.start()
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C during the starts arrives here
         for worker in workers:
             worker.join()
     except KeyboardInterrupt:  # the workers got the same SIGINT: let them record it
         for worker in workers:
             worker.join()
         raise
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     return [worker.exitcode for worker in workers]
 
 
@@ -105,23 +153,9 @@ def slurm_settings(slurm: SlurmConfig) -> dict[str, Any]:
 
 
 def check_slurm(slurm: SlurmConfig) -> None:
-    """ConfigError unless SLURM answers here (``sinfo``) and has the partition(s) asked for."""
-    import subprocess
-
-    try:
-        done = subprocess.run(["sinfo", "--noheader", "--format=%P"], capture_output=True, text=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired) as err:
-        raise ConfigError(f"search.launcher=slurm: cannot run sinfo here ({err}); submit from a SLURM login "
-                          f"node") from None
-    if done.returncode != 0:
-        reason = (done.stderr.strip().splitlines() or [f"exit code {done.returncode}"])[-1]
-        raise ConfigError(f"search.launcher=slurm: SLURM does not answer here ({reason})")
-    known = [name.rstrip("*") for name in done.stdout.split()]
-    wanted = slurm_settings(slurm)["partition"]
-    missing = [name for name in (wanted or "").split(",") if name and name not in known]
-    if missing:
-        raise ConfigError(f"search.slurm.partition={wanted}: no partition {', '.join(missing)} here; "
-                          f"choose among: {', '.join(known)}")
+    """ConfigError unless SLURM answers here (``sinfo``) and has the partition(s) asked for, as hersd-sweep
+    checks its own (:func:`sweeps.launchers.check_slurm`)."""
+    check_slurm_answers(slurm_settings(slurm)["partition"], "search.launcher=slurm", "search.slurm.partition")
 
 
 def submit_slurm(plan: SearchPlan, shares: list[int]) -> list[str]:
