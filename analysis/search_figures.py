@@ -114,7 +114,7 @@ def trials_frame(study: optuna.Study) -> pd.DataFrame:
         decays = kind in PLANE_KINDS
         row = {"trial": trial.number, "state": trial.state.name.lower(), "value": trial.value, "kind": kind,
                "beta1": params.get("beta1"),
-               "beta2": getattr(schedule_config(params), "beta2", None) if decays else None,
+               "beta2": getattr(schedule_config(params), "beta2", None) if decays else params.get("beta2"),
                "eps": params.get("eps"), REWARD_PARAM: params.get(REWARD_PARAM),
                **{name: params.get(name) for name in others}, "last_step": trial.last_step,
                "retry_of": trial.user_attrs.get(RETRY_OF_ATTR),
@@ -297,7 +297,8 @@ def plot_settings(frame: pd.DataFrame, panels: list[str], ranges: dict[str, Sett
     if not plane:  # the plane's legend names the marks
         counts = frame["state"].value_counts()
         marks = marker_handles({state: int(counts.get(state, 0)) for state in ("complete", "pruned", "fail")})
-        fig.legend(handles=marks, loc="outside lower center", ncol=4, fontsize=LEGEND_SIZE, frameon=False)
+        fig.legend(handles=marks, loc="outside lower center", ncol=min(4, 2 * columns), fontsize=LEGEND_SIZE,
+                   frameon=False)  # one panel is too narrow for the four marks in a row
     return fig
 
 

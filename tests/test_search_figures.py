@@ -99,6 +99,32 @@ def test_a_search_of_an_outside_schedule_is_drawn_against_each_setting_and_table
     assert len(complete_dots) == 4 and sorted(complete_dots[:, 1]) == pytest.approx(sorted(best["value"]))
 
 
+def test_an_outside_schedule_with_eq_9s_setting_names_is_tabled_and_drawn_with_both(newcomer_steps, tmp_path):
+    """A class of one's own searching settings named beta1 and beta2 (not eq. 9's decay, so off the plane): both
+    are columns of the best trials and a panel each; a one-setting study's legend stays inside its figure."""
+    from analysis.search_figures import read_study
+    from analysis.studies import open_study_storage
+
+    def warp(trial):
+        trial.set_user_attr(KIND_ATTR, f"{MODULE}.Warp")
+        return trial.suggest_float("beta1", 0.3, 0.6) + trial.suggest_float("beta2", 0.0, 1.0)
+
+    def low_only(trial):
+        trial.set_user_attr(KIND_ATTR, newcomer_steps)
+        return trial.suggest_float("low", 0.0, 1.0)
+
+    _search(f"sqlite:///{tmp_path / 'own.db'}", "warp", warp)
+    _search(f"sqlite:///{tmp_path / 'own.db'}", "low", low_only)
+    storage = open_study_storage(tmp_path / "own.db").storage
+    summary = read_study(storage, "warp")
+    assert summary.best[["beta1", "beta2"]].notna().all().all() and len(summary.best) == 4
+    assert [ax.get_xlabel() for ax in summary.figure().axes if ax.get_visible()] == ["beta1", "beta2"]
+    figure = read_study(storage, "low").figure()
+    figure.canvas.draw()
+    box, edges = figure.legends[0].get_window_extent(), figure.bbox
+    assert edges.x0 <= box.x0 and box.x1 <= edges.x1, (box, edges)
+
+
 def test_a_search_of_decays_and_other_settings_draws_the_plane_above_a_panel_for_each_other(tmp_path):
     from analysis.search_figures import StudySummary, read_study
     from analysis.studies import open_study_storage

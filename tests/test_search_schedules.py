@@ -48,7 +48,8 @@ def test_a_search_whose_trials_all_fail_exits_non_zero_naming_the_first_error(tm
     assert exit_info.value.code == 1
     assert [trial.state for trial in load(only_db(tmp_path)).trials] == [TrialState.FAIL] * 2
     assert capsys.readouterr().err.splitlines()[-1] == (
-        "hersd-search: error: every trial of this search failed; the first, trial 0: RuntimeError: boom at epoch 2")
+        "hersd-search: error: every trial of this search failed; the first, trial 0: ScheduleRateRaised: schedule "
+        f"{MODULE}.Boom: its rate at epoch 2 of 2 raised RuntimeError: boom at epoch 2")
 
 
 def docs_command(marker: str) -> list[str]:

@@ -5,8 +5,10 @@ on PYTHONPATH; and by an entry point of the group ``hersd.schedules``."""
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from helpers import TINY, command
@@ -111,6 +113,46 @@ def test_an_adaptive_rate_outside_0_1_stops_its_run_at_that_epoch_keeping_the_fi
     assert stopped.stderr.count("\n") == 1 and "its rate at epoch 2 of 3 is 1.4, not in [0, 1]" in stopped.stderr
     (log,) = results.glob("reach/her/lateover/seed0-*/run.mcap")
     assert list(read_run(log).epochs["relabel_rate"]) == [0.9]
+
+
+def test_an_adaptive_rate_that_raises_stops_its_run_in_one_line_keeping_the_finished_epochs(tmp_path):
+    from user_schedules import MODULE, command, write_module
+
+    results = tmp_path / "results"
+    stopped = command("hersd.engine.cli:main", [*TINY, "epochs=3", "quiet=true", "threads=1", f"results_dir={results}",
+                                         f"schedule._target_={MODULE}.LateRaise"], write_module(tmp_path), code=1)
+    (log,) = results.glob("reach/her/lateraise/seed0-*/run.mcap")
+    assert stopped.stderr == (f"hersd-train: error: schedule {MODULE}.LateRaise: its rate at epoch 2 of 3 raised "
+                              f"ZeroDivisionError: float division by zero; the finished epochs are kept in "
+                              f"{log.parent}\n")
+    assert list(read_run(log).epochs["relabel_rate"]) == [0.9]
+
+
+def test_a_subclass_with_a_rate_of_its_own_has_its_own_mean_rate_and_refuses_its_parents_solve():
+    """A subclass of exponential whose rate squares eq. 9's: mu_eps is the mean of its own rates, not eq. 10's,
+    its limit unknown, and mean_rate (which exponential solves by eq. 10) is one line; a subclass that keeps the
+    parent's rate keeps its formulas."""
+    from hersd.contract.schedules.exponential import Exponential
+
+    @dataclass
+    class Squared(Exponential):
+        def rate(self, k, total_epochs, train_success=()):
+            return super().rate(k, total_epochs) ** 2
+
+    @dataclass
+    class Renamed(Exponential):
+        pass
+
+    squared = Squared(beta1=0.5, beta2=0.5)
+    assert squared.exact_mean_rate(4) == pytest.approx(np.mean([squared.rate(k, 4) for k in range(1, 5)]))
+    assert squared.exact_mean_rate(4) != pytest.approx(Exponential(beta1=0.5, beta2=0.5).exact_mean_rate(4))
+    assert squared.limit_mean_rate() is None
+    with pytest.raises(ConfigError, match="^schedule.mean_rate: .*Squared has a rate of its own"):
+        Squared(beta2=0.5, mean_rate=0.8).resolve(4)
+    Squared(beta1=0.5, beta2=0.5).resolve(4)  # nothing to solve: fine
+    renamed = Renamed(beta2=0.5, mean_rate=0.8)
+    renamed.resolve(4)
+    assert renamed.exact_mean_rate(4) == pytest.approx(0.8) and renamed.limit_mean_rate() is not None
 
 
 def test_tag_and_label_default_to_the_class_name_and_its_settings(tmp_path, monkeypatch):

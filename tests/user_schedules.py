@@ -11,8 +11,8 @@ from pathlib import Path
 
 MODULE = "newcomer_steps"
 
-# KStep declares no tag, label or kind: the defaults name its folders. Over's rate leaves [0, 1] from the
-# start, LateOver's (adaptive) at epoch 2; Boom's rate raises once a run is under way (epoch 2), after the checks.
+# KStep declares no tag, label or kind: the defaults name its folders; Warp's settings share eq. 9's names. Over's rate leaves [0, 1] from the
+# start, LateOver's (adaptive) at epoch 2, LateRaise's (adaptive) raises there; Boom's rate raises once a run is under way (epoch 2), after the checks.
 SOURCE = '''
 from dataclasses import dataclass
 
@@ -33,6 +33,17 @@ class KStep(Schedule):
 
 
 @dataclass
+class Warp(Schedule):
+    searched = ("beta1", "beta2")
+
+    beta1: float = param(0.4, 0.3, 0.6, "the drop by epoch K")
+    beta2: float = param(0.5, 0.0, 1.0, "the bend: eps(k) = 1 - beta1 (k / K) ** (1 + beta2)")
+
+    def rate(self, k, total_epochs, train_success=()):
+        return 1.0 - self.beta1 * (k / total_epochs) ** (1.0 + self.beta2)
+
+
+@dataclass
 class Over(KStep):
     high: float = param(1.4, 0.0, 2.0, "a rate no schedule may give")
 
@@ -43,6 +54,14 @@ class LateOver(Schedule):
 
     def rate(self, k, total_epochs, train_success=()):
         return 0.9 if k == 1 else 1.4
+
+
+@dataclass
+class LateRaise(Schedule):
+    adaptive = True
+
+    def rate(self, k, total_epochs, train_success=()):
+        return 0.9 / (2 - k)
 
 
 @dataclass

@@ -214,7 +214,7 @@ def checked_config(argv: list[str]) -> TrainConfig:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
-    losses turn NaN or infinite with one line and exit code 1, an interrupt (Ctrl-C) with one line
+    losses turn NaN or infinite, or whose schedule's rate raises, with one line and exit code 1, an interrupt (Ctrl-C) with one line
     and exit code 130: in training, naming the folder that keeps the finished epochs; before it (the config
     composed, torch and MuJoCo loaded), saying so."""
     argv = sys.argv[1:] if argv is None else argv
@@ -227,6 +227,7 @@ def main(argv: list[str] | None = None) -> None:
             return
         cfg = checked_config(argv)
         from hersd.contract.runstore import RunLockedError, run_dir
+        from hersd.contract.schedules import ScheduleRateRaised
         from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
         from hersd.engine.train import NonFiniteLossError, RunStateError, train
     except KeyboardInterrupt:
@@ -243,6 +244,8 @@ def main(argv: list[str] | None = None) -> None:
         _fail(str(err))
     except NonFiniteLossError as err:
         _fail(str(err), code=1)
+    except ScheduleRateRaised as err:
+        _fail(f"{err}; the finished epochs are kept in {run_dir(cfg)}", code=1)
     except KeyboardInterrupt:
         print(f"hersd-train: interrupted; the finished epochs are kept in {run_dir(cfg)}: re-run the same "
               "command to resume", file=sys.stderr)

@@ -14,7 +14,7 @@ other packages' (entry point group ``hersd.schedules``) and any class by path (`
 The paper's equations 9-11 are in equations.py. Imports neither torch nor the config.
 """
 
-from hersd.contract.schedules.base import FLAT_RECORD, Schedule, ScheduleRateError, kind_name, param
+from hersd.contract.schedules.base import FLAT_RECORD, Schedule, ScheduleRateError, ScheduleRateRaised, kind_name, param
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.cosine import Cosine
 from hersd.contract.schedules.equations import (BETA2_LIMIT, MU_EPS_BAND, beta1_for_mean_rate, decay_rate, mean_rate_approx,
@@ -27,6 +27,6 @@ from hersd.contract.schedules.success import Success
 from hersd.contract.schedules.table import Table
 
 __all__ = ["BETA2_LIMIT", "Constant", "Cosine", "DEFAULT", "Exponential", "Linear", "Success", "Table", "ENTRY_POINT_GROUP", "FLAT_RECORD", "MU_EPS_BAND", "SCHEDULES", "Schedule",
-           "ScheduleRateError", "TARGET_KEY", "beta1_for_mean_rate", "decay_rate", "kind_name", "known_kinds", "mean_rate_approx",
+           "ScheduleRateError", "ScheduleRateRaised", "TARGET_KEY", "beta1_for_mean_rate", "decay_rate", "kind_name", "known_kinds", "mean_rate_approx",
            "mean_rate_exact", "param", "registered", "schedule_class", "schedule_from_config", "schedule_from_record",
            "schedule_rank", "settle"]

@@ -18,7 +18,7 @@ import math
 import numbers
 import re
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Sequence
+from typing import Any, Callable, ClassVar, Sequence
 
 import numpy as np
 
@@ -34,6 +34,11 @@ FLAT_RECORD: dict[str, Any] = {"eps": HER_RATE, "beta1": 0.0, "beta2": 0.0, "mea
 
 class ScheduleRateError(ConfigError):
     """A schedule gave a rate outside [0, 1]; the message is one line naming the schedule and the epoch."""
+
+
+class ScheduleRateRaised(RuntimeError):
+    """A schedule's rate raised once its run was under way (an adaptive schedule's, or a fixed one's past the
+    epochs checked up front): one line naming the schedule, the epoch and the error; the finished epochs are kept."""
 
 
 def param(default: Any, low: float, high: float, doc: str, integer: bool = False, optional: bool = False) -> Any:
@@ -65,11 +70,16 @@ class Schedule:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """A subclass of a kind that names its own folders and labels (linear's ``linear-b1_0.25``) names its own
-        by default, the class name and every setting, unless it defines tag or label: it is another schedule."""
+        by default, the class name and every setting, unless it defines tag or label: it is another schedule. One
+        that defines its own rate drops its parent's closed-form mean rates (eq. 10, 11) for the mean of its own
+        rates, and refuses a ``mean_rate`` its parent's resolve would solve by the parent's formula."""
         super().__init_subclass__(**kwargs)
-        for method in ("tag", "label"):
+        own_rate = "rate" in vars(cls)
+        for method in ("tag", "label", *(("exact_mean_rate", "limit_mean_rate") if own_rate else ())):
             if method not in vars(cls) and getattr(cls, method) is not getattr(Schedule, method):
                 setattr(cls, method, getattr(Schedule, method))
+        if own_rate and "resolve" not in vars(cls) and cls.resolve is not Schedule.resolve:
+            cls.resolve = _without_inherited_solve(cls.resolve)
 
     def __post_init__(self) -> None:
         for item in self.params():
@@ -95,8 +105,13 @@ class Schedule:
         raise NotImplementedError
 
     def checked_rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
-        """:meth:`rate`, or ScheduleRateError (one line) when it is not a number in [0, 1]."""
-        rate = self.rate(k, total_epochs, train_success)
+        """:meth:`rate`; ScheduleRateError (one line) when it is not a number in [0, 1], ScheduleRateRaised
+        (one line) when computing it raises."""
+        try:
+            rate = self.rate(k, total_epochs, train_success)
+        except Exception as err:  # noqa: BLE001 - a user's rate: one line naming it
+            raise ScheduleRateRaised(f"schedule {kind_name(type(self))}: its rate at epoch {k} of {total_epochs} "
+                                     f"raised {type(err).__name__}: {' '.join(str(err).split())}") from None
         if isinstance(rate, np.ndarray) and rate.size == 1:  # np.where(...) of a scalar: a 0-d array (or [x])
             rate = rate.item()
         is_number = isinstance(rate, numbers.Real) and not isinstance(rate, bool)  # numpy's scalars too
@@ -145,6 +160,18 @@ class Schedule:
         return {"kind": kind_name(type(self)), **(FLAT_RECORD if self.flat_record else {}), **own}
 
 
+def _without_inherited_solve(inherited: Callable[[Schedule, int], None]) -> Callable[[Schedule, int], None]:
+    """``inherited`` (a parent kind's resolve) for a subclass with a rate of its own: ConfigError (one line) when
+    ``mean_rate`` is set, which the parent solves by its own formula (eq. 10 for linear and exponential)."""
+    def resolve(self: Schedule, total_epochs: int) -> None:
+        if getattr(self, "mean_rate", None) is not None:
+            raise ConfigError(f"schedule.mean_rate: {kind_name(type(self))} has a rate of its own, which its parent's "
+                              f"mean_rate solve does not know; set its settings instead, or define its resolve()")
+        inherited(self, total_epochs)
+
+    return resolve
+
+
 def kind_name(cls: type[Schedule]) -> str:
     """The kind a schedule class is recorded under: the ``kind`` it declares itself (not one it inherits, so a
     subclass of a registered kind is not taken for it), else its import path."""
@@ -174,11 +201,8 @@ def check_rates(schedule: Schedule, total_epochs: int) -> None:
     for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1):
         try:
             schedule.checked_rate(k, total_epochs)
-        except ScheduleRateError:
-            raise
-        except Exception as err:  # noqa: BLE001 - a user's rate: one line naming it, before any work
-            raise ScheduleRateError(f"schedule {kind_name(type(schedule))}: its rate at epoch {k} of {total_epochs} "
-                                    f"raised {type(err).__name__}: {' '.join(str(err).split())}") from None
+        except ScheduleRateRaised as err:  # before any work: bad input
+            raise ScheduleRateError(str(err)) from None
 
 
 def check_param(item: dataclasses.Field, value: Any) -> None:
