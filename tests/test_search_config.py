@@ -117,3 +117,14 @@ def test_an_enqueued_set_leaving_a_setting_out_takes_it_as_schedule_kind_sets_it
         {"kind": "constant", "eps": HER_RATE}, {"kind": "exponential", "beta1": 0.25, "beta2": 0.25}]
     assert fixed("wide", "search.enqueue=[{kind: linear}, {kind: exponential, beta2: 1.0}]") == [
         {"kind": "linear", "beta1": 0.25}, {"kind": "exponential", "beta1": 0.25, "beta2": 1.0}]
+
+
+def test_the_default_files_paper_points_go_to_exponential_only(tmp_path: Path, monkeypatch) -> None:
+    """default.yaml's two points name their kind: a search of a class of one's own whose settings are also called
+    beta1 and beta2 (tests/user_schedules.py's Warp) does not take them, an exponential search does."""
+    from user_schedules import MODULE, write_module
+
+    monkeypatch.syspath_prepend(str(write_module(tmp_path)))
+    assert compose_search("default", [f"search.space.kinds=[{MODULE}.Warp]"]).enqueue == []
+    assert [dict(params) for params in compose_search("default", []).enqueue] == [
+        {"kind": "exponential", "beta1": 0.25, "beta2": 0.25}, {"kind": "exponential", "beta1": 0.5, "beta2": 0.5}]
