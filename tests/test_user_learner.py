@@ -293,3 +293,62 @@ def test_an_error_of_its_own_in_the_settings_check_is_one_line_naming_the_learne
         "hersd-train: error: learner user_late.CheckedLate: its settings refused learner.checkedlate.x=2: ValueError: "
         "x must be < 1\n")
     assert not results.exists()
+
+
+NAMED = '''
+
+class Name(TD3):
+    SETTINGS = LateSettings
+'''
+
+# Settings whose module resolves annotations lazily and imports one type for type checkers only.
+HINTED = '''
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Optional
+
+from hersd.contract.config import TD3Config
+from hersd.engine.learners.td3 import TD3
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+
+@dataclass
+class HintedSettings(TD3Config):
+    actor_start: int = 4
+    notes: Optional[Path] = None
+
+
+class Hinted(TD3):
+    SETTINGS = HintedSettings
+'''
+
+
+def test_a_learner_whose_settings_key_would_be_learners_own_is_refused_in_one_line(user_late):
+    """A class named Name would read learner.name.*, which is the learner's name: it could never be set."""
+    from hersd.contract.config import TrainConfig
+
+    (user_late / "user_late.py").write_text(LATE + NAMED)
+    with pytest.raises(ConfigError, match=r"^learner user_late\.Name: its settings would be learner\.name\.\*, "
+                                          r"which is learner's own key; rename the class or give it NAME"):
+        TrainConfig(learner={"_target_": "user_late.Name"})
+
+
+def test_one_annotation_that_does_not_resolve_leaves_the_other_settings_typed(tmp_path, monkeypatch):
+    """Path is imported for type checkers only, so notes' annotation does not resolve: actor_start is still an
+    int setting (2.0 is 2: one run folder; a word is one line), and notes is left to the class."""
+    from hersd.contract.config import TrainConfig
+
+    (tmp_path / "user_hinted.py").write_text(HINTED)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        settings = TrainConfig(learner={"_target_": "user_hinted.Hinted", "hinted": {"actor_start": 2.0}}).learner.settings
+        assert settings.actor_start == 2 and isinstance(settings.actor_start, int)
+        with pytest.raises(ConfigError, match=r"^learner\.hinted\.actor_start must be a whole number, got 'abc'$"):
+            TrainConfig(learner={"_target_": "user_hinted.Hinted", "hinted": {"actor_start": "abc"}})
+        assert TrainConfig(learner={"_target_": "user_hinted.Hinted",
+                                    "hinted": {"notes": "x"}}).learner.settings.notes == "x"
+    finally:
+        sys.modules.pop("user_hinted", None)

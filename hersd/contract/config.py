@@ -248,7 +248,11 @@ def learner_settings_class(name: str) -> tuple[str, Optional[type]]:
     if name in PACKAGE_LEARNERS:
         return name, PACKAGE_LEARNERS[name]
     cls = learner_class(name, known=tuple(PACKAGE_LEARNERS))  # imports the class's module (and torch)
-    return recorded_name(cls), cls.SETTINGS
+    recorded = recorded_name(cls)
+    _check(cls.SETTINGS is None or learner_key(recorded) not in ("name", LEARNER_TARGET_KEY),
+           f"learner {recorded}: its settings would be learner.{learner_key(recorded)}.*, which is learner's own "
+           f"key; rename the class or give it NAME = \"<another name>\"")
+    return recorded, cls.SETTINGS
 
 
 def parent_keys(name: str) -> set[str]:
@@ -321,10 +325,7 @@ def learner_settings(key: str, settings_class: type, section: Any, name: Optiona
     unknown = sorted(set(section) - set(fields))
     _check(not unknown, f"learner.{key}.{unknown[0] if unknown else ''} is not a setting; "
            f"its settings: {', '.join(fields) or 'none'}")
-    try:
-        types = typing.get_type_hints(settings_class)
-    except (NameError, TypeError):  # annotations that do not resolve here: the class's own checks only
-        types = {}
+    types = _field_types(settings_class)
     values = {field_name: _typed(f"learner.{key}.{field_name}", types.get(field_name), value)
               for field_name, value in section.items()}
     token = _SETTINGS_KEY.set(key)  # the class's own range checks name this key (setting_name)
@@ -338,6 +339,25 @@ def learner_settings(key: str, settings_class: type, section: Any, name: Optiona
             from None
     finally:
         _SETTINGS_KEY.reset(token)
+
+
+def _field_types(settings_class: type) -> dict[str, Any]:
+    """Each field's declared type, resolved field by field: one whose annotation does not resolve here (a name
+    imported for type checkers only) is left to the class's own checks, the others keep theirs."""
+    try:
+        return typing.get_type_hints(settings_class)
+    except (NameError, TypeError):
+        pass
+    types: dict[str, Any] = {}
+    for cls in reversed(settings_class.__mro__):
+        namespace = vars(sys.modules[cls.__module__]) if cls.__module__ in sys.modules else {}
+        for field_name, annotation in vars(cls).get("__annotations__", {}).items():
+            try:
+                types[field_name] = eval(annotation, namespace, dict(vars(cls))) if isinstance(annotation, str) \
+                    else annotation  # what typing.get_type_hints does for each
+            except Exception:  # noqa: BLE001 - this field's annotation only
+                types.pop(field_name, None)
+    return types
 
 
 def _typed(name: str, declared: Any, value: Any) -> Any:
