@@ -61,7 +61,19 @@ class OldPaths(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         return module
 
     def exec_module(self, module):
+        old = module.__spec__.name
         module.__spec__ = module.__spec__.loader_state
+        moved_elsewhere = {child.rpartition(".")[2] for child in MOVED if child.rpartition(".")[0] == old
+                           and moved_to(child) != f"{module.__name__}.{child.rpartition('.')[2]}"}
+        if moved_elsewhere and not hasattr(module, "__getattr__"):  # from hersd.envs import tasks (now contract's)
+            def __getattr__(name):
+                if name in moved_elsewhere:
+                    return importlib.import_module(f"{old}.{name}")
+                raise AttributeError(f"module {module.__name__!r} has no attribute {name!r}")
+            module.__getattr__ = __getattr__
+
+    def get_code(self, name):  # python -m <old path>
+        return importlib.util.find_spec(moved_to(name)).loader.get_code(moved_to(name))
 
 
 sys.meta_path.insert(0, OldPaths())

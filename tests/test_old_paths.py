@@ -140,3 +140,17 @@ def test_a_checkpoint_names_no_module_of_hersd(tmp_path):
     globals_ = [arg for op, arg, _ in pickletools.genops(io.BytesIO(data)) if op.name == "GLOBAL"]
     assert globals_ and not [name for name in globals_ if name.split()[0].split(".")[0] == "hersd"], globals_
     assert any(name.startswith("sklearn") for name in globals_)  # MEP's mixture, fitted at epoch 2
+
+
+def test_every_old_module_imports_by_from_its_parent_and_runs_by_python_m():
+    """``from hersd.envs import tasks`` (a child whose parent moved elsewhere: hersd.envs went to hersd.engine.envs,
+    its tasks to hersd.contract.tasks) as well as ``import hersd.envs.tasks``, in a fresh interpreter; and
+    ``python -m`` of an old command module."""
+    pairs = [old.rpartition(".") for old in sorted(MOVED) if "." in old]
+    code = "\n".join(f"from {parent} import {leaf}" for parent, _, leaf in pairs)
+    code += "\nimport hersd.contract.tasks\nassert tasks is hersd.contract.tasks"
+    result = subprocess.run([sys.executable, "-c", f"from hersd.envs import tasks\n{code}"], capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    shown = subprocess.run([sys.executable, "-m", "hersd.cli", "--help"], capture_output=True, text=True, timeout=300)
+    assert shown.returncode == 0 and "hersd-train" in shown.stdout, shown.stderr[-2000:]
