@@ -618,8 +618,9 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
 
 def _dodged(arms: pd.DataFrame, span: float) -> pd.Series:
     """x of each arm (rows of ``arms``, column mu_eps): its mu_eps, moved sideways by DODGE x ``span`` steps when
-    other arms share it, the group centred on it."""
-    shared = arms.groupby(arms["mu_eps"].round(9))["mu_eps"]
+    other arms share it (within metrics.EQUAL_MU_TOLERANCE of the next lower), the group centred on it."""
+    ascending = arms["mu_eps"].sort_values()
+    shared = arms.groupby((ascending.diff() >= metrics.EQUAL_MU_TOLERANCE).cumsum().reindex(arms.index))["mu_eps"]
     rank, count = shared.cumcount(), shared.transform("size")
     return arms["mu_eps"] + (rank - (count - 1) / 2) * DODGE * span
 

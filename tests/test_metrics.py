@@ -223,6 +223,26 @@ def test_each_decay_is_tested_in_both_directions_against_the_constant_rate_at_it
     assert (tests["splits"] == 10).all() and tests["smallest_p"].tolist() == pytest.approx([1 / 10] * 6)
 
 
+@pytest.mark.parametrize("decay, control", [
+    (ScheduleConfig("linear", mean_rate=0.9), ScheduleConfig(eps=0.9)),  # beta1 solved to 6 decimals: mu 0.89999975
+    (ScheduleConfig("exponential", beta1=0.25, beta2=0.25), ScheduleConfig(eps=0.869156)),  # summary's 6 decimals
+])
+def test_a_decay_meets_its_control_at_the_six_decimals_a_user_types(tmp_path, decay, control):
+    """A decay whose mu_eps misses the control's by the rounding of a solved beta1 or of summary.csv's mu_eps
+    (< 5e-7) is still paired with it, and Fig. 12 draws the two side by side rather than one on the other."""
+    from analysis.figures import DODGE, _dodged
+
+    for seed in range(2):
+        write_run(tmp_path / f"decay{seed}", make_config(schedule=decay, seed=seed), np.full(6, 0.9 - seed / 10))
+        write_run(tmp_path / f"control{seed}", make_config(schedule=control, seed=seed), np.full(6, 0.5 - seed / 10))
+    analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
+    mu = analysis.summary.set_index("config")["mu_eps"]
+    assert 0 < abs(mu.iloc[0] - mu.iloc[1]) < 5e-7
+    assert len(analysis.equal_mu_tests) == len(metrics.EQUAL_MU_OUTCOMES)
+    arms = mu.reset_index()
+    assert abs(_dodged(arms, 1.0).diff().iloc[1]) == pytest.approx(DODGE, rel=1e-3)
+
+
 def test_each_variant_is_tested_in_both_directions_against_its_configuration_at_the_defaults(tmp_path):
     """HER at precision=bf16 and at update=fast are each paired with HER (the same settings otherwise), not with
     ARCHER (other reward weights) nor with each other; linear b1=0.5 at bf16 has no configuration at the defaults
