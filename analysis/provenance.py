@@ -40,8 +40,8 @@ PROVENANCE_COLUMNS = (
     "epoch_hours",        # wall-clock hours of its epochs, summed (epoch_seconds; bias evaluations apart): with
                           # whatever stopped or slowed the process (a paused campaign, other work on its cores)
     "bias_evaluations",   # epochs with a bias evaluation (hersd/engine/bias.py)
-    "bias_seconds",       # their wall-clock seconds, summed (bias_seconds)
-    "bias_percent",       # bias_seconds as a percentage of paced_hours (0 without evaluations)
+    "bias_seconds",       # their wall-clock seconds, summed (bias_seconds): with whatever stopped the process
+    "bias_percent",       # bias_evaluations at their median seconds, as a percentage of paced_hours (0 without)
     "first_date", "last_date",  # UTC: the first session's start, the log's last message's time
 )
 # the page's table: a run named by its task, configuration and seed (its folder the tooltip), then its
@@ -128,16 +128,19 @@ def _run_provenance(sessions: list[dict[str, Any]]) -> dict[str, Any]:
 def run_cost(epochs: pd.DataFrame) -> pd.DataFrame:
     """Per run (index ``run``), from its logged epochs: ``seconds_per_epoch`` (median), ``paced_hours``,
     ``epoch_hours``, ``bias_evaluations``, ``bias_seconds`` and ``bias_percent`` (:data:`PROVENANCE_COLUMNS`). The
-    median pace is the cost a reader can plan with: a paused process adds its pause to the epoch under way
-    (wall-clock ``epoch_seconds``), which the sum keeps and the median ignores."""
+    median pace is the cost a reader can plan with: a paused process adds its pause to the epoch or the bias
+    evaluation under way (wall-clock ``epoch_seconds``, ``bias_seconds``), which the sums keep and the medians
+    ignore, so ``bias_percent`` prices each evaluation at the run's median evaluation."""
     grouped = epochs.groupby("run")
     cost = pd.DataFrame({"seconds_per_epoch": grouped["epoch_seconds"].median(),
                          "epoch_seconds": grouped["epoch_seconds"].sum(), "epochs": grouped.size(),
                          "bias_evaluations": grouped["bias_seconds"].count(),
-                         "bias_seconds": grouped["bias_seconds"].sum()})  # sum of none: 0
+                         "bias_seconds": grouped["bias_seconds"].sum(),  # sum of none: 0
+                         "bias_median": grouped["bias_seconds"].median().fillna(0.0)})
     paced = cost["epochs"] * cost["seconds_per_epoch"]
     return cost.assign(paced_hours=paced / 3600, epoch_hours=cost["epoch_seconds"] / 3600,
-                       bias_percent=100 * cost["bias_seconds"] / paced).drop(columns=["epoch_seconds", "epochs"])
+                       bias_percent=100 * cost["bias_evaluations"] * cost["bias_median"] / paced,
+                       ).drop(columns=["epoch_seconds", "epochs", "bias_median"])
 
 
 def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.DataFrame) -> pd.DataFrame:

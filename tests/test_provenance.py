@@ -109,7 +109,7 @@ def test_session_spans_follow_the_metadata_messages():
 
 
 def test_each_runs_cost_and_the_bias_evaluations_share_of_it_come_from_its_epochs(tmp_path):
-    bias_seconds = np.array([3.0, 4.5, np.nan, np.nan, 6.0, np.nan])  # evaluations at epochs 1, 2 and 5
+    bias_seconds = np.array([3.0, 4.5, np.nan, np.nan, 906.0, np.nan])  # at epochs 1, 2 and 5, paused 15 min in 5
     write_run(tmp_path / "evaluated", make_config(seed=0), np.full(6, 0.5), bias_seconds=bias_seconds,
               epoch_seconds=np.array([40.0, 50.0, 45.0, 45.0, 45.0, 945.0]))  # paused 15 min in epoch 6
     write_run(tmp_path / "unevaluated", make_config(seed=1), np.full(6, 0.5))
@@ -117,6 +117,6 @@ def test_each_runs_cost_and_the_bias_evaluations_share_of_it_come_from_its_epoch
     evaluated, unevaluated = table.loc[0], table.loc[1]
     assert evaluated["epoch_hours"] == pytest.approx(1170 / 3600) and evaluated["seconds_per_epoch"] == 45.0
     assert evaluated["paced_hours"] == pytest.approx(6 * 45 / 3600)  # the pause left out
-    assert (evaluated["bias_evaluations"], evaluated["bias_seconds"]) == (3, 13.5)
-    assert evaluated["bias_percent"] == pytest.approx(5.0)  # 13.5 s of the 270 s at the median pace
+    assert (evaluated["bias_evaluations"], evaluated["bias_seconds"]) == (3, 913.5)
+    assert evaluated["bias_percent"] == pytest.approx(5.0)  # 3 x 4.5 s (the median) of the 270 s at the median pace
     assert (unevaluated["bias_evaluations"], unevaluated["bias_seconds"], unevaluated["bias_percent"]) == (0, 0.0, 0.0)
