@@ -135,12 +135,11 @@ def run_cost(epochs: pd.DataFrame) -> pd.DataFrame:
     cost = pd.DataFrame({"seconds_per_epoch": grouped["epoch_seconds"].median(),
                          "epoch_seconds": grouped["epoch_seconds"].sum(), "epochs": grouped.size(),
                          "bias_evaluations": grouped["bias_seconds"].count(),
-                         "bias_seconds": grouped["bias_seconds"].sum(),  # sum of none: 0
-                         "bias_median": grouped["bias_seconds"].median().fillna(0.0)})
+                         "bias_seconds": grouped["bias_seconds"].sum()})  # sum of none: 0
     paced = cost["epochs"] * cost["seconds_per_epoch"]
+    bias_paced = cost["bias_evaluations"] * grouped["bias_seconds"].median().fillna(0.0)
     return cost.assign(paced_hours=paced / 3600, epoch_hours=cost["epoch_seconds"] / 3600,
-                       bias_percent=100 * cost["bias_evaluations"] * cost["bias_median"] / paced,
-                       ).drop(columns=["epoch_seconds", "epochs", "bias_median"])
+                       bias_percent=100 * bias_paced / paced).drop(columns=["epoch_seconds", "epochs"])
 
 
 def provenance_table(runs: pd.DataFrame, epochs: pd.DataFrame, sessions: pd.DataFrame) -> pd.DataFrame:
