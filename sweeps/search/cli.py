@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import shlex
 import sys
+import time
 from pathlib import Path
 from typing import NoReturn
 
@@ -24,7 +25,8 @@ from hersd.engine.resources import check_machine
 from sweeps.search.storage import open_storage
 from sweeps.search.config import compose_search
 from sweeps.search.plan import SearchPlan, make_plan
-from sweeps.search.study import count_finished, first_error, open_study, requeue_lost_trials, trial_counts
+from sweeps.search.study import (POLL_SECONDS, count_finished, first_error, live_running, open_study,
+                                 requeue_lost_trials, trial_counts)
 from sweeps.search.workers import check_slurm, run_local, split_trials, submit_slurm
 
 USAGE = """usage: hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OVERRIDES ...]
@@ -103,7 +105,22 @@ def launch(plan: SearchPlan, storage: BaseStorage, study: optuna.Study) -> list[
               f"the study with: {report_command(plan.base.results_dir, plan.storage)} (re-run this command to "
               f"resume a search cut short)")
         return None
-    return run_local(plan, shares)
+    codes = run_local(plan, shares)
+    await_other_workers(plan, study)
+    return codes
+
+
+def await_other_workers(plan: SearchPlan, study: optuna.Study) -> None:
+    """Wait for the trials other commands' workers run while the study holds fewer than search.n_trials finished
+    ones: commands joined on one study then end on one count."""
+    stale_after_seconds = plan.search.stale_after_minutes * 60
+    running = live_running(study, stale_after_seconds)
+    if not running or count_finished(study) >= plan.search.n_trials:
+        return
+    print(f"waiting for trial(s) {', '.join(map(str, running))}, run by other workers on this study", flush=True)
+    while running and count_finished(study) < plan.search.n_trials:
+        time.sleep(POLL_SECONDS)
+        running = live_running(study, stale_after_seconds)
 
 
 def report_command(results_dir: str, spec: str) -> str:

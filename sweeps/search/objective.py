@@ -29,7 +29,9 @@ from hersd.contract.study import (KIND_ATTR, REWARD_PARAM, RUN_DIRS_ATTR, kind_p
                                   trial_config)
 from sweeps.search.space import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
-from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR
+from sweeps.search.study import ERROR_ATTR, SKIPPED_ATTR, beyond_target, enqueued_before
+
+PRUNED_REASON_ATTR = "pruned_reason"  # trial: why it was pruned (the pruner, a non-finite objective, no schedule)
 
 
 def suggest_params(trial: optuna.Trial, space: SpaceConfig) -> dict[str, Any]:
@@ -76,7 +78,7 @@ class TrialProgress:
 
     def _prune(self, reason: str) -> None:
         """Stop the trial as pruned, recording why."""
-        self.trial.set_user_attr("pruned_reason", reason)
+        self.trial.set_user_attr(PRUNED_REASON_ATTR, reason)
         raise optuna.TrialPruned(reason)
 
     def update(self, seed_index: int, values: np.ndarray, may_prune: bool) -> None:
@@ -143,21 +145,54 @@ def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, p
     progress.finish_seed(logged)
 
 
+def shown_params(params: dict[str, Any]) -> str:
+    """A trial's parameters for messages, numbers rounded: ``kind=my.Ramp, drop=0.97, k_step=1``."""
+    return ", ".join(f"{name}={value:.6g}" if isinstance(value, float) else f"{name}={value}"
+                     for name, value in params.items())
+
+
+def skip_unneeded(trial: optuna.Trial, plan: SearchPlan) -> None:
+    """Skip (prune unrun, user attribute ``skipped``) a trial the study does not need: a copy of a search.enqueue set
+    an earlier trial tries, or one past search.n_trials counting the live trials started before it."""
+    earlier = enqueued_before(trial)
+    if earlier is not None:
+        reason = f"trial {earlier} tries the same search.enqueue set"
+    elif beyond_target(trial, plan.search.n_trials, plan.search.stale_after_minutes * 60):
+        reason = f"the study holds search.n_trials={plan.search.n_trials} trials, finished or running"
+    else:
+        return
+    trial.set_user_attr(SKIPPED_ATTR, reason)
+    raise optuna.TrialPruned(f"skipped: {reason}")
+
+
+def trial_configs(trial: optuna.Trial, plan: SearchPlan, params: dict[str, Any], threads: str) -> list[TrainConfig]:
+    """The trial's runs, one per seed, each with its folder; a draw that makes no valid schedule (a rate outside
+    [0, 1] the start check's grid missed) prunes the trial, its reason naming the draw."""
+    try:
+        configs = [trial_config(plan.base, params, plan.search.first_seed + index, threads)
+                   for index in range(plan.search.seeds)]
+    except ConfigError as err:
+        reason = f"no schedule at {shown_params(params)}: {err}"
+        trial.set_user_attr(PRUNED_REASON_ATTR, reason)
+        raise optuna.TrialPruned(reason) from None
+    return [replace(cfg, run_dir=str(run_dir(cfg))) for cfg in configs]  # folders computed once: training takes them
+
+
 def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: list[str] | None = None) -> float:
     """Train the trial's runs (one per seed, in turn, ``threads`` each) -> the mean of their objectives."""
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     _heartbeat(trial)
+    skip_unneeded(trial, plan)
     params = suggest_params(trial, plan.search.space)
     trial.set_user_attr(KIND_ATTR, params["kind"])
+    configs = trial_configs(trial, plan, params, threads)
     mu_exact, mu_approx = mean_rates(params, plan.epochs)
     trial.set_user_attr("mu_eps", mu_exact)
     trial.set_user_attr("mu_eps_approx", mu_approx)
     progress = TrialProgress(trial, plan.search.objective, plan.epochs)
     run_dirs: list[str] = []
     try:
-        for seed_index in range(plan.search.seeds):
-            cfg = trial_config(plan.base, params, plan.search.first_seed + seed_index, threads)
-            cfg = replace(cfg, run_dir=str(run_dir(cfg)))  # its folder, computed once: training takes it as given
+        for seed_index, cfg in enumerate(configs):
             run_dirs.append(cfg.run_dir)
             trial.set_user_attr(RUN_DIRS_ATTR, run_dirs)  # before training: failed and pruned trials have it too
             train_seed(trial, plan, progress, params, cfg, seed_index)

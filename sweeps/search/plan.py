@@ -20,10 +20,12 @@ from hersd.contract.config import ScheduleConfig, TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
-from hersd.contract.study import REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params, trial_config
+from hersd.contract.schedules import settle
+from hersd.contract.study import (REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params,
+                                  schedule_config, trial_config)
 from sweeps.search.storage import resolve_storage
 from sweeps.search.config import SearchConfig, enqueued_kind
-from sweeps.search.space import space_bounds, space_record
+from sweeps.search.space import box_points, space_bounds, space_record
 
 # Training keys a search override may not set: the search chooses them, or (run_dir) every
 # run of every trial would share one directory.
@@ -95,6 +97,20 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
                 trial_config(base, params, seed)
             except ConfigError as err:
                 raise ConfigError(f"{where}: {err}") from None
+    for kind in kinds:
+        check_box(kind, search, base.epochs)
+
+
+def check_box(kind: str, search: SearchConfig, epochs: int) -> None:
+    """ConfigError (one line) naming the first combination of the searched box (corners, then a grid) at which
+    ``kind`` is no schedule of ``epochs`` epochs, e.g. a rate outside [0, 1]: a trial would draw near it."""
+    for point in box_points(search.space, kind):
+        try:
+            settle(schedule_config({"kind": kind, **point}), epochs)
+        except ConfigError as err:
+            shown = ", ".join(f"{name}={value:.6g}" for name, value in point.items())
+            raise ConfigError(f"search.space: {kind} at {shown}, within the searched ranges: {err}; narrow "
+                              f"search.space.ranges to settings it accepts together") from None
 
 
 def make_plan(search: SearchConfig, train_overrides: list[str], search_name: str = "default") -> SearchPlan:

@@ -6,15 +6,19 @@ their checks. Every check raises :class:`hersd.contract.errors.ConfigError` with
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Iterator, Optional
+
+import numpy as np
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import SCHEDULES, Exponential, known_kinds, schedule_class
 from hersd.contract.study import PAPER_SETTINGS, REWARD_PARAM, kind_params, schedule_config, searchable
 
 RANGES_KEY = "search.space.ranges"
+BOX_POINTS = 500  # about how many combinations of a kind's searched settings the start check evaluates (a grid)
 
 
 @dataclass
@@ -163,21 +167,48 @@ def check_space(space: SpaceConfig) -> None:
         check(space.lambda_h.low > 0, f"search.space.lambda_h: low must be > 0, got {space.lambda_h.low}")
 
 
+def axis_values(bounds: Bounds, whole: bool, count: int) -> list[Any]:
+    """``count`` values over a range, its ends included (log-spaced for a log range); a whole-number setting's at
+    whole numbers, every one when the range holds no more than ``count``."""
+    low, high = (math.ceil(bounds.low), math.floor(bounds.high)) if whole else (bounds.low, bounds.high)
+    if whole and high - low + 1 <= count:
+        return list(range(low, high + 1))
+    spaced = (np.geomspace if bounds.log else np.linspace)(low, high, count)
+    values = [int(round(value)) if whole else float(value) for value in spaced]
+    return [low, *values[1:-1], high]  # the ends exactly
+
+
+def box_points(space: SpaceConfig, kind: str) -> Iterator[dict[str, Any]]:
+    """The combinations of ``kind``'s searched settings the start check evaluates: the searched box's corners, then
+    a grid over it (about BOX_POINTS points, whole numbers at whole values), each once."""
+    names = kind_params(kind)
+    ranges = [(space_bounds(space, kind, name), whole_number(kind, name)) for name in names]
+    per_axis = max(2, int(BOX_POINTS ** (1 / len(names)) + 1e-9))
+    corners = itertools.product(*(axis_values(bounds, whole, 2) for bounds, whole in ranges))
+    grid = itertools.product(*(axis_values(bounds, whole, per_axis) for bounds, whole in ranges))
+    seen = set()
+    for values in itertools.chain(corners, grid):
+        if values not in seen:
+            seen.add(values)
+            yield dict(zip(names, values))
+
+
 def split_range_overrides(overrides: list[str]) -> tuple[list[str], dict[str, Bounds]]:
-    """``search.space.ranges={name: {low, high}}`` and ``search.space.ranges.<name>={low, high}`` (``+`` or not)
-    -> (the other overrides, the ranges they set); Hydra cannot add a key to a typed mapping, so these are read here."""
-    import yaml
+    """``search.space.ranges={name: {low, high}}`` and ``search.space.ranges.<name>={low, high}`` (``+`` or not, Hydra's
+    syntax: ``{low:1,high:2}`` too) -> (the other overrides, the ranges they set); Hydra cannot add a key to a typed
+    mapping, so these are read here."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
 
     rest, ranges = [], {}
     for override in overrides:
-        key, _, value = override.partition("=")
-        key = key.lstrip("+")
+        key = override.partition("=")[0].lstrip("+")
         if key != RANGES_KEY and not (key.startswith(f"{RANGES_KEY}.") and key.count(".") == RANGES_KEY.count(".") + 1):
             rest.append(override)
             continue
         try:
-            parsed = yaml.safe_load(value)
-        except yaml.YAMLError:
+            parsed = OverridesParser.create().parse_override(override.lstrip("+")).value()
+        except HydraException:
             parsed = None
         given = parsed if key == RANGES_KEY else {key.rpartition(".")[2]: parsed}
         check(isinstance(given, dict) and all(isinstance(bounds, dict) for bounds in given.values()),

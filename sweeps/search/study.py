@@ -1,8 +1,11 @@
 """The study in its storage: created or loaded (and checked to measure the same thing), its
-sampler and pruner, and the recovery of trials lost by dead or stopped workers."""
+sampler and pruner, its search.enqueue sets (each tried once), the trials live workers run (so that
+workers of joined commands stop at search.n_trials), and the recovery of trials lost by dead or stopped
+workers."""
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import time
@@ -19,12 +22,15 @@ from optuna.trial import FrozenTrial, TrialState
 from hersd.contract.errors import ConfigError
 from hersd.contract.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
 from sweeps.search.config import SamplerConfig, enqueued_params
+from sweeps.search.optuna_private import fixed_params, seed_tpe
 from sweeps.search.space import space_record
 from sweeps.search.plan import SearchPlan
 
 FINISHED_STATES = (TrialState.COMPLETE, TrialState.PRUNED)  # what search.n_trials counts, less skipped trials
 SKIPPED_ATTR = "skipped"  # trial: pruned unrun, because another worker held its run (the same parameters): why
 ERROR_ATTR = "error"  # trial: the exception that failed it, on one line (the command names the first)
+ENQUEUED_ATTR = "enqueued"  # trial: the search.enqueue set it tries, as JSON (a set is tried once per study)
+POLL_SECONDS = 2.0  # how often a worker waiting for other workers' trials looks at the study
 SPACE_ATTR = "space"  # study: what it draws (sweeps.search.space.space_record), set when it is created
 
 
@@ -38,8 +44,7 @@ class TrialSeededTPE(optuna.samplers.TPESampler):
 
     def before_trial(self, study: optuna.Study, trial: FrozenTrial) -> None:
         seed = int(np.random.SeedSequence([self.base_seed, trial.number]).generate_state(1)[0])
-        self._rng.rng.seed(seed)  # TPE's own draws and its random sampler's (the startup trials)
-        self._random_sampler._rng.rng.seed(seed)
+        seed_tpe(self, seed)  # TPE's own draws and its random sampler's (the startup trials)
         super().before_trial(study, trial)
 
 
@@ -49,17 +54,6 @@ def make_sampler(sampler: SamplerConfig) -> optuna.samplers.TPESampler:
         warnings.simplefilter("ignore", ExperimentalWarning)
         return TrialSeededTPE(sampler.seed, n_startup_trials=sampler.n_startup_trials,
                               multivariate=sampler.multivariate, group=sampler.multivariate)
-
-
-class StopWhenDone:
-    """Optuna callback: stop the study once it holds ``n_trials`` complete or pruned trials, not counting skipped ones."""
-
-    def __init__(self, n_trials: int) -> None:
-        self.n_trials = n_trials
-
-    def __call__(self, study: optuna.Study, trial: FrozenTrial) -> None:
-        if count_finished(study) >= self.n_trials:
-            study.stop()
 
 
 def make_pruner(plan: SearchPlan) -> optuna.pruners.BasePruner:
@@ -85,8 +79,7 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
         study.set_user_attr(SETTINGS_ATTR, asdict(plan.settings))
         study.set_user_attr(SPACE_ATTR, space_record(plan.search.space))
         study.set_user_attr(TRAIN_OVERRIDES_ATTR, plan.train_overrides)
-        for params in plan.search.enqueue:
-            study.enqueue_trial(enqueued_params(params, list(plan.search.space.kinds)))
+        enqueue_sets(study, plan)
         return study
     study = optuna.load_study(study_name=plan.study_name, storage=storage)
     stored, settings = study.user_attrs.get(SETTINGS_ATTR), asdict(plan.settings)
@@ -98,7 +91,61 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
     if space is not None and space != space_record(plan.search.space):
         raise ConfigError(f"study {plan.study_name!r} draws from another search space ({space}); choose another "
                           f"search.study_name, or the space it was made with")
+    enqueue_sets(study, plan)
     return study
+
+
+def enqueue_sets(study: optuna.Study, plan: SearchPlan) -> None:
+    """Enqueue each ``search.enqueue`` set the study holds no trial of (a line names those it holds): a set is
+    tried once per study, however many commands name it; two commands enqueuing one set at the same moment are
+    settled when a worker takes the later copy (:func:`enqueued_before`)."""
+    trials = study.get_trials(deepcopy=False)
+    for index, params in enumerate(plan.search.enqueue):
+        stored = enqueued_params(params, list(plan.search.space.kinds))
+        key = json.dumps(stored, sort_keys=True)
+        held = [trial.number for trial in trials if trial.user_attrs.get(ENQUEUED_ATTR) == key
+                or all({**fixed_params(trial), **trial.params}.get(name) == value
+                       for name, value in stored.items())]
+        if held:
+            print(f"search.enqueue[{index}] {stored}: the study holds it already (trial {held[0]}); not enqueued "
+                  "again", flush=True)
+        else:
+            study.enqueue_trial(stored, user_attrs={ENQUEUED_ATTR: key})
+
+
+def enqueued_before(trial: optuna.Trial) -> int | None:
+    """The number of an earlier trial of the same ``search.enqueue`` set as ``trial``, if any."""
+    key = trial.user_attrs.get(ENQUEUED_ATTR)
+    if key is None:
+        return None
+    return next((other.number for other in trial.study.get_trials(deepcopy=False)
+                 if other.number < trial.number and other.user_attrs.get(ENQUEUED_ATTR) == key), None)
+
+
+def live_running(study: optuna.Study, stale_after_seconds: float) -> list[int]:
+    """The numbers of RUNNING trials whose workers are alive (not lost, :func:`stale_reason`)."""
+    now = time.time()
+    return [trial.number for trial in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+            if stale_reason(trial, now, stale_after_seconds) is None]
+
+
+def room_for_trial(study: optuna.Study, n_trials: int, stale_after_seconds: float) -> bool:
+    """Wait while the trials other workers run could bring the study to ``n_trials`` -> whether one more trial
+    may start (False once the study holds ``n_trials`` complete or pruned trials)."""
+    while True:
+        finished = count_finished(study)
+        if finished >= n_trials:
+            return False
+        if finished + len(live_running(study, stale_after_seconds)) < n_trials:
+            return True
+        time.sleep(POLL_SECONDS)
+
+
+def beyond_target(trial: optuna.Trial, n_trials: int, stale_after_seconds: float) -> bool:
+    """Whether the study's finished trials and the live trials numbered below ``trial`` make ``n_trials`` already
+    (two workers that started a trial at one moment: the later one is not needed)."""
+    running = [number for number in live_running(trial.study, stale_after_seconds) if number < trial.number]
+    return count_finished(trial.study) + len(running) >= n_trials
 
 
 def count_finished(study: optuna.Study) -> int:
@@ -180,7 +227,7 @@ def requeue_lost_trials(study: optuna.Study, storage: BaseStorage, stale_after_s
                 continue
         elif not (trial.state == TrialState.FAIL and trial.user_attrs.get("interrupted")):
             continue
-        params = {**trial.system_attrs.get("fixed_params", {}), **trial.params}
+        params = {**fixed_params(trial), **trial.params}
         study.enqueue_trial(params, user_attrs={RETRY_OF_ATTR: trial.number})
         requeued.append(trial.number)
     return requeued

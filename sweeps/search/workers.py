@@ -30,7 +30,7 @@ from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
 from sweeps.search.plan import SearchPlan, run_threads
-from sweeps.search.study import StopWhenDone, make_pruner, make_sampler
+from sweeps.search.study import make_pruner, make_sampler, room_for_trial
 
 SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
 SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
@@ -57,6 +57,20 @@ class QuietInterrupt(logging.Filter):
         return not self.interrupted
 
 
+class OneLineFailures(logging.Filter):
+    """Optuna's lines on a failed trial made one: the error without its traceback, the "failed with value None"
+    line dropped (the trial's user attribute ``error`` keeps the error; the command names the first)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message.startswith("Trial ") and " failed with value " in message:
+            return False
+        if record.exc_info and not isinstance(record.exc_info[1], KeyboardInterrupt):
+            record.msg, record.args = " ".join(message.split()), None
+            record.exc_info, record.exc_text = None, None
+        return True
+
+
 def interrupted(err: BaseException | None) -> bool:
     """Whether ``err`` is a Ctrl-C or was raised while one was handled: Optuna's bookkeeping cut by the
     KeyboardInterrupt between trials ends in another error (the trial stays RUNNING: re-run as lost)."""
@@ -73,18 +87,21 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid
     a Ctrl-C ends it with exit code 130 and no traceback."""
     if parent_pid is not None:
         threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
-    quiet, handlers = QuietInterrupt(), logging.getLogger("optuna").handlers
+    filters, handlers = (QuietInterrupt(), OneLineFailures()), logging.getLogger("optuna").handlers
     for handler in handlers:
-        handler.addFilter(quiet)
+        for log_filter in filters:
+            handler.addFilter(log_filter)
     refusals: list[str] = []
     try:
         if parent_pid is not None:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C while it started arrives now
         study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
                                   sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
-        study.optimize(partial(objective, plan=plan, threads=run_threads(plan.base, concurrent_runs),
-                               refusals=refusals), n_trials=n_trials, catch=(Exception,),
-                       callbacks=[StopWhenDone(plan.search.n_trials)])
+        run_trial = partial(objective, plan=plan, threads=run_threads(plan.base, concurrent_runs), refusals=refusals)
+        for _ in range(n_trials):  # stop at search.n_trials in the study, counting the trials other workers run
+            if refusals or not room_for_trial(study, plan.search.n_trials, plan.search.stale_after_minutes * 60):
+                break
+            study.optimize(run_trial, n_trials=1, catch=(Exception,))
     except BaseException as err:
         if not interrupted(err):
             raise
@@ -93,7 +110,8 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid
         sys.exit(130)  # a worker process: the trial is recorded as interrupted (or re-run as lost); no traceback
     finally:
         for handler in handlers:
-            handler.removeFilter(quiet)
+            for log_filter in filters:
+                handler.removeFilter(log_filter)
     if refusals and parent_pid is None:
         raise ConfigError(refusals[0])
     if refusals:
