@@ -15,7 +15,9 @@ removed when its log is landed anew. An unfinished log there with more epochs th
 run restarted without a checkpoint and has not caught up) is kept too, until the new attempt passes
 it. A campaign log that is not a readable run log (no run metadata) is not landed (``skipped``); a
 chunk whose checksum fails ends what is read of a log, like a cut (hersd.contract.runlog). One line
-per run: ``landed``, ``unchanged``, ``kept`` or ``skipped``, with its state.
+per run: ``landed``, ``unchanged``, ``kept``, ``skipped`` or ``refused``, with its state. A new log (none
+at its path below RESULTS yet) with a session whose ``git_commit`` ends in ``-dirty`` (trained uncommitted code,
+which exists nowhere) is ``refused``, in one line, and the exit status is 1; logs landed before stay as they are.
 
 ``--commit``: each complete run whose files differ from git's is committed alone, those files
 only (whatever else is staged stays staged): ``results: <run> complete (K epochs)``. A git
@@ -38,6 +40,7 @@ from hersd.contract.runstore import POLICY_DIR, RunFolder
 
 REPOSITORY = Path(__file__).resolve().parent.parent
 GIT_TRIES, GIT_WAIT = 10, 3.0  # tries of a git command that fails, seconds between them
+DIRTY = "-dirty"  # a session's git_commit ending so trained uncommitted code (hersd.contract.runlog)
 
 
 def log_state(path: Path) -> tuple[bool, int, str]:
@@ -48,6 +51,18 @@ def log_state(path: Path) -> tuple[bool, int, str]:
         return False, -1, "unreadable"
     epochs = len(records.records)
     return records.complete, epochs, (f"complete ({epochs} epochs)" if records.complete else f"epoch {epochs}")
+
+
+def dirty_session(path: Path) -> str | None:
+    """Why a log's code exists nowhere: ``session N trained at <commit>-dirty``, for its first session whose
+    ``git_commit`` marks uncommitted changes; None when every session trained committed code (or it is unreadable)."""
+    try:
+        sessions = read_records(path).sessions
+    except RunLogError:
+        return None
+    dirty = [(number, session["git_commit"]) for number, session in enumerate(sessions, start=1)
+             if str(session.get("git_commit") or "").endswith(DIRTY)]
+    return f"session {dirty[0][0]} trained at {dirty[0][1]}" if dirty else None
 
 
 def write_atomically(data: bytes, target: Path) -> bool:
@@ -70,6 +85,9 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
         complete, epochs, state = log_state(snapshot)
         if epochs < 0:
             return "skipped", False, f"{state}: not landed"
+        if not (target / LOG_NAME).exists() and (dirty := dirty_session(snapshot)):  # landed logs stay as they are
+            return "refused", False, (f"{state}: {dirty}, code that exists nowhere: not landed; train from a "
+                                      "committed tree (results/README.md)")
         if not complete and (target / LOG_NAME).exists():
             landed_complete, landed_epochs, landed_state = log_state(target / LOG_NAME)
             if landed_complete or landed_epochs > epochs:  # a run that restarted has not caught up yet
@@ -146,13 +164,15 @@ def main(argv: list[str] | None = None) -> int:
         target = args.into / relative
         verb, complete, state = land_run(log.parent, target)
         note = ""
+        failed += verb == "refused"
         if args.commit and complete:
             try:
                 note = "; " + commit_run(target, relative, state)
             except RuntimeError as err:
                 note, failed = f"; {err}", failed + 1
         say(f"{verb:<9} {target / LOG_NAME}  {state}{note}")
-    say(f"{len(logs)} run(s) in {campaign} landed in {args.into}" + (f"; {failed} not committed" if failed else ""))
+    say(f"{len(logs)} run(s) in {campaign} landed in {args.into}" + (f"; {failed} not landed or not committed"
+                                                                     if failed else ""))
     return 1 if failed else 0
 
 

@@ -8,7 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.claims import CONTROL, EXP_025, HER, LINEAR_025, Claim, claims_markdown, claims_table
+from analysis.claims import (CONTROL, EXP_025, HER, LINEAR_025, NOT_MEASURED, REGISTRY, Claim, Hypothesis,
+                             claims_markdown, claims_table, full_claims_table, late_judged_runs, registered_hypotheses,
+                             slide_q_row, spread_row)
 
 ROOT = Path(__file__).resolve().parent.parent
 FASTER = Claim("push", "decay faster", "Fig. 4(a)", LINEAR_025, HER, "epochs_to_0.9")
@@ -116,3 +118,125 @@ def test_results_md_opens_with_the_claims_tables_of_the_committed_report():
     generated = claims_markdown(table.assign(p=pd.to_numeric(table["p"], errors="coerce")))
     opening = "\n".join((ROOT / "docs/RESULTS.md").read_text(encoding="utf-8").splitlines()[:80])
     assert generated.strip() in opening
+
+
+def per_seed_table(values: dict[str, list[float]], column: str = "final", task: str = "push") -> pd.DataFrame:
+    return pd.DataFrame([{"task": task, "config": config, "seed": seed, "complete": True, column: value}
+                         for config, seeds in values.items() for seed, value in enumerate(seeds)])
+
+
+def test_the_words_give_the_medians_and_the_seed_means_the_test_compares():
+    """Medians 100 v 140 in the summary; the per-seed table's means, an epoch never reached counted as K + 1."""
+    seeds = per_seed_table({LINEAR_025: [100, 110, np.nan], HER: [140, 150, 160]}, column="epochs_to_0.9")
+    row = claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS, (FASTER,), seeds).iloc[0]
+    assert row["hersd"].endswith(f"; seed means {(100 + 110 + 201) / 3:.4g} vs 150 (the test's statistic)")
+
+
+@pytest.mark.parametrize("p_better, p_worse, verdict", [(0.01, 0.99, "separated: linear b1=0.25 better"),
+                                                        (0.99, 0.01, "separated: linear b1=0.25 worse"),
+                                                        (0.3, 0.7, "not separated at 5 v 5")])
+def test_a_registered_two_sided_hypothesis_says_separated_or_not_and_a_one_sided_one_supported(p_better, p_worse,
+                                                                                              verdict):
+    two_sided = Claim("push", "h: differ", "stage 2", LINEAR_025, HER, "epochs_to_0.9", two_sided=True, registered="h")
+    row = claims_table(summary_table(100, 140), permutation_table(p_better, p_worse), NO_BIAS, (two_sided,)).iloc[0]
+    assert (row["verdict"], row["p"], row["registered"]) == (verdict, pytest.approx(2 * min(p_better, p_worse)), "h")
+    one_sided = Claim("push", "h: faster", "stage 3", LINEAR_025, HER, "epochs_to_0.9", registered="h")
+    assert claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS,
+                        (one_sided,)).iloc[0]["verdict"] == "supported"
+
+
+def test_the_seed_spread_claim_tests_the_spreads_two_sided_exactly():
+    """Four tight decay seeds against four spread HER seeds: every split as extreme is 2 of C(8, 4) = 70."""
+    curves = {LINEAR_025: [0.5, 0.51, 0.49, 0.5], HER: [0.1, 0.9, 0.3, 0.7]}
+    seeds = pd.concat([per_seed_table(curves, column=f"smoothed_at_{epoch}") for epoch in (50, 100, 150, 200)],
+                      axis=1).loc[:, lambda table: ~table.columns.duplicated()]
+    row = spread_row(seeds)
+    assert row["seeds"] == "4 v 4" and row["verdict"] == "reproduced" and row["p"] == pytest.approx(2 / 70)
+    assert row["test"] == "permutation, two-sided, exact (smallest p possible 0.029)"
+    assert spread_row(seeds.assign(config=seeds["config"].map({LINEAR_025: HER, HER: LINEAR_025})))["verdict"] == \
+        "contradicted"
+
+
+def test_the_slide_q_claim_is_a_paired_two_sided_sign_flip_test_over_both_methods_seeds():
+    seeds = pd.DataFrame({"task": "slide", "config": [HER] * 3 + [LINEAR_025] * 3, "complete": True,
+                          "q_mean_at_10": [-4.0] * 6, "q_mean_at_200": [-9.0, -8.0, -9.5, -9.0, -10.0, -8.5],
+                          "bias_real_mean_at_10": 30.0, "bias_real_mean_at_200": 20.0})
+    row = slide_q_row(seeds)
+    assert row["p"] == pytest.approx(2 / 64) and row["verdict"] == "not reproduced: diminished"
+    mixed = seeds.assign(q_mean_at_200=[-9.0, 1.0, -9.5, 2.0, -10.0, 3.0])
+    assert slide_q_row(mixed)["verdict"] == "consistent: not diminished at 6 seeds"
+
+
+def test_every_registered_hypothesis_and_every_other_paper_claim_has_a_row():
+    hypotheses = registered_hypotheses()
+    ids = [h.claim.registered for h in hypotheses]
+    assert {"bf16-final", "bf16-speed", "order-final", "late-final", "late-her", "exp-push-speed",
+            "archer-decay-final", "archer-her-final"} == set(ids) and len(ids) == len(set(ids))
+    table = full_claims_table(*(pd.read_csv(ROOT / f"results/report/tables/{name}.csv") for name in
+                                ("summary", "permutation_tests", "critic_bias_tests", "per_seed")))
+    registered = table[table["registered"] != ""]
+    assert sorted(words.split(",")[0] for words in registered["registered"]) == sorted(ids)
+    assert registered["registered"].str.contains(r"`[0-9a-f]{7}` \d{4}-\d\d-\d\d \d\d:\d\d UTC|not committed yet").all()
+    assert set(table["claim"]) >= {claim.statement for claim in NOT_MEASURED}
+    assert {"Fig. 4 (text)", "Fig. 10(c)"} <= set(table.loc[table["p"].notna(), "paper"])  # measured
+    planned = {plan for claim in NOT_MEASURED for plan in claim.plan.split(", ") if plan}
+    assert planned <= set(ids)
+
+
+def test_the_registered_arms_are_the_labels_the_report_gives_their_runs():
+    from analysis.load import config_label
+    from hersd.contract.schedules import Constant, Exponential, Linear, Rising
+
+    labels = {config_label(Constant(), 1, 1, False), config_label(Constant(), 1, 1, False, variants=["precision=bf16"]),
+              config_label(Rising(beta1=0.25), 1, 1, False), config_label(Constant(eps=0.75), 1, 1, False),
+              config_label(Exponential(beta1=0.25, beta2=0.25), 1, 1, False), config_label(Linear(beta1=0.25), 1, 1, False),
+              config_label(Constant(), 1, 0.5, False, algo="archer"),
+              config_label(Linear(beta1=0.25), 1, 0.5, False, algo="archer")}
+    for hypothesis in registered_hypotheses():
+        assert {hypothesis.claim.config, hypothesis.claim.versus} <= labels, hypothesis.claim.registered
+
+
+def test_every_run_a_registered_hypothesis_judges_started_after_its_registering_commit(tmp_path):
+    """The committed logs (and any landed since) against docs/registered.csv; then a planted registration newer
+    than a run it judges fails, one line naming the run."""
+    from analysis.load import load_runs
+
+    hypotheses = registered_hypotheses()
+    committed = load_runs(ROOT / "results")
+    assert late_judged_runs(hypotheses, committed.runs, committed.sessions) == []
+    planted = Hypothesis(Claim("push", "newer", "stage 9", HER, CONTROL, "final", registered="planted"), "9",
+                         (HER,), "f" * 40, "2030-01-01T00:00:00+00:00")
+    late = late_judged_runs([*hypotheses, planted], committed.runs, committed.sessions)
+    assert late and all("before planted was registered (fffffff, 2030-01-01T00:00:00+00:00)" in line for line in late)
+    assert len(late) == ((committed.runs["task"] == "push") & (committed.runs["config"] == HER)).sum()
+
+
+def test_a_run_that_started_before_the_registration_is_named(tmp_path):
+    from analysis.load import load_runs
+    from analysis.synthetic import write_run
+    from hersd.contract.config import TrainConfig
+
+    for seed, start in ((0, "2026-11-28T20:00:00+0000"), (1, "2026-11-29T01:00:00+0000")):
+        config = TrainConfig(seed=seed, precision="bf16")
+        config.task.name = "push"
+        write_run(tmp_path / f"bf16-{seed}", config, np.zeros(3), meta={"start_time": start})
+    table = load_runs(tmp_path)
+    late = late_judged_runs(registered_hypotheses(), table.runs, table.sessions)
+    assert len(late) == 2 and all(line.startswith("bf16-0/run.mcap: started 2026-11-28 20:00:00 UTC, before bf16-")
+                                  for line in late)
+    unregistered = [Hypothesis(h.claim, h.stage, h.judges, "", "") for h in registered_hypotheses()]
+    assert len(late_judged_runs(unregistered, table.runs, table.sessions)) == 4  # a run judged before any commit
+
+
+def test_the_registry_names_the_commit_that_added_each_id_to_results_md():
+    """git log -S<id>: the first commit adding the id to docs/RESULTS.md, and its date (where git is at hand)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("no git repository here")
+    for hypothesis in (h for h in registered_hypotheses() if h.commit):
+        found = subprocess.run(["git", "log", f"-S{hypothesis.claim.registered}", "--format=%H %cI", "--reverse",
+                                "--", "docs/RESULTS.md"], cwd=ROOT, capture_output=True, text=True, check=True)
+        assert found.stdout.split("\n")[0].split() == [hypothesis.commit, hypothesis.date], hypothesis.claim.registered
+    assert REGISTRY.is_file()

@@ -145,7 +145,8 @@ def test_the_paper_kinds_presets_keep_their_tags_and_records(preset):
     """Tags of the conf/schedule presets, as the flat schema made them (a record holds every flat field)."""
     golden = {"constant": "constant-0.8", "constant_mu_linear_025": "constant-0.874375",
               "exponential": "exponential-b1_0.25-b2_0.25", "linear": "linear-b1_0.25", "success": "success-b1_0.25-w10",
-              "cosine": "cosine-1_0.5", "table": "table-506cb7a1"}
+              "cosine": "cosine-1_0.5", "table": "table-506cb7a1", "rising_linear_025": "rising-b1_0.25",
+              "constant_075": "constant-0.75"}
     golden.update({f"paper_{shape}_{n:03d}": f"linear-b1_{n / 100:g}" if shape == "linear"
                    else f"exponential-b1_{n / 100:g}-b2_{n / 100:g}" for shape in ("linear", "exp") for n in (25, 50, 75, 100)})
     given = ["epochs=2", "schedule.rates=[0.9,0.8]"] if preset == "table" else []  # a table needs its rates
@@ -153,6 +154,8 @@ def test_the_paper_kinds_presets_keep_their_tags_and_records(preset):
     assert schedule.tag() == golden[preset]
     if preset == "table":
         assert schedule.record() == {"kind": "table", "rates": [0.9, 0.8], "file": None, "from_run": None}
+    elif preset == "rising_linear_025":  # a kind after the flat schema: its own settings only
+        assert schedule.record() == {"kind": "rising", "beta1": 0.25, "beta2": 0.0}
     elif preset != "cosine":
         assert set(schedule.record()) == {"kind", "eps", "beta1", "beta2", "mean_rate", "window", "eps_min"}
 

@@ -207,3 +207,23 @@ def test_a_reader_that_went_away_ends_the_lines_not_the_landing(tmp_path, repo):
     os.close(write)
     assert landed.returncode == 0 and not landed.stderr
     assert all((repo / "results" / run / "run.mcap").is_file() for run in (DONE, RUNNING))
+
+
+def test_a_new_log_with_a_dirty_session_is_refused_in_one_line_and_landed_ones_stay(tmp_path, repo):
+    """A session trained at ``<commit>-dirty`` ran code that exists nowhere: such a new log is not landed (one
+    line, exit 1); a clean one beside it lands; a log already below results/ stays as it was landed."""
+    campaign, results = tmp_path / "campaign", repo / "results"
+    with mock.patch("os.fsync"):
+        write_run(campaign / RUNNING, TrainConfig(epochs=200), np.linspace(0, 1, 3), complete=False,
+                  meta={"git_commit": "1a2b3c4-dirty"})
+        write_run(campaign / DONE, TrainConfig(epochs=200), np.linspace(0, 1, 3), complete=False,
+                  meta={"git_commit": "1a2b3c4"})
+    done = land(campaign, repo)
+    refused = [line for line in done.stdout.splitlines() if line.startswith("refused")]
+    assert done.returncode == 1 and refused == [
+        f"refused   {results / RUNNING / 'run.mcap'}  epoch 3: session 1 trained at 1a2b3c4-dirty, code that "
+        "exists nowhere: not landed; train from a committed tree (results/README.md)"]
+    assert not (results / RUNNING).exists() and (results / DONE / "run.mcap").is_file()
+    (results / RUNNING).mkdir(parents=True)  # landed before this rule: it stays, and follows its campaign copy
+    (results / RUNNING / "run.mcap").write_bytes(b"")
+    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 3" in land(campaign, repo).stdout

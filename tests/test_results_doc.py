@@ -1,6 +1,6 @@
 """docs/RESULTS.md and results/README.md keep provenance where it is generated: no commit id or resume epoch
 typed in their prose (quoted commands and code blocks may name them); every section of docs/RESULTS.md that
-other docs point readers to exists."""
+other docs point readers to exists; no one-sided p whose direction no claim fixed before the data."""
 
 import re
 from pathlib import Path
@@ -9,6 +9,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMIT_ID = re.compile(r"\b(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}\b")  # hex with a digit and a letter
+# What fixes a one-sided test's direction before the data: the paper's claims (the decay does better than a fixed
+# rate: "for the decay", "for the linear", "for the exponential", "the paper's direction"), a one-sided hypothesis
+# registered before its runs (its id, docs/registered.csv); else the sentence says it is exploratory.
+PAPER_DIRECTION = r"for the (?:linear|exponential|decay)\b|the paper's direction|exploratory"
+GENERATED_BLOCK = re.compile(r"<!-- ([\w-]+)\b.*?-->.*?<!-- /\1 -->", re.DOTALL)
 RESUME_EPOCH = re.compile(r"(resum\w*[^.;]{0,60}?|checkpoints? after )\bepochs? \d", re.IGNORECASE)
 
 
@@ -48,3 +53,40 @@ def test_the_results_sections_other_docs_name_exist():
     for name in ("The paper's claims, measured", "Reproduction: FetchPush", "Decay or mean rate",
                  "Reproduction: FetchPickAndPlace", "Reproduction: FetchSlide", "Denormals"):
         assert any(heading.startswith(name) for heading in headings), name
+
+
+def one_sided_directions() -> re.Pattern:
+    """What may follow a one-sided p in the same sentence: PAPER_DIRECTION or a registered one-sided hypothesis's id."""
+    from analysis.claims import registered_hypotheses
+
+    ids = [re.escape(h.claim.registered) for h in registered_hypotheses() if not h.claim.two_sided]
+    return re.compile("|".join([PAPER_DIRECTION, *ids]), re.IGNORECASE)
+
+
+def undirected_one_sided(markdown: str) -> list[str]:
+    """The prose sentences of ``markdown`` (outside generated blocks, tables, headings and code) that give a p as
+    one-sided without what fixed its direction (:func:`one_sided_directions`)."""
+    lines = [line for line in prose(GENERATED_BLOCK.sub("", markdown))
+             if not line.lstrip().startswith(("|", "#", "<!--"))]
+    text = " ".join(" ".join(lines).split())
+    sentences = re.split(r"(?<=[.!?])\s+(?=[A-Z(\"])", text)
+    fixed = one_sided_directions()
+    return [sentence for sentence in sentences if re.search(r"one-sided", sentence, re.IGNORECASE)
+            and re.search(r"\bp\s*=|\bp-values?\b", sentence) and not fixed.search(sentence)]
+
+
+@pytest.mark.parametrize("doc", ["docs/RESULTS.md", "README.md", "results/README.md"])
+def test_every_one_sided_p_says_the_claim_that_fixed_its_direction(doc):
+    """A one-sided p whose direction the data chose doubles its evidence: report it two-sided or exploratory."""
+    assert undirected_one_sided((ROOT / doc).read_text(encoding="utf-8")) == []
+
+
+def test_a_planted_one_sided_p_without_a_claim_is_refused_and_one_with_its_claim_is_not():
+    text = (ROOT / "docs/RESULTS.md").read_text(encoding="utf-8")
+    planted = "The control even ends below HER (median 0.563 against 0.691, one-sided p = 0.028)."
+    assert undirected_one_sided(text + "\n" + planted + "\n") == [planted]
+    for fixed in ("one-sided p = 0.028 for the decay", "one-sided p = 0.028, exploratory",
+                  "one-sided p = 0.028, as order-final registered"):
+        assert undirected_one_sided(text + "\n" + planted.replace("one-sided p = 0.028", fixed) + "\n") == []
+    table_row = "| a | b | one-sided p: HER does better |\n"  # generated comparisons give both directions
+    assert undirected_one_sided(table_row + "`one-sided p = 0.1`\n") == []

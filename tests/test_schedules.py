@@ -163,27 +163,78 @@ def test_table_rates_inline_from_a_file_and_from_a_runs_log(tmp_path):
         TrainConfig(schedule={"kind": "table", "from_run": str(tmp_path / "nowhere")}, epochs=4)
 
 
-# Strings equal to a kind's name that are not that kind: the env's info key and a column of success rates.
-NOT_KINDS = {("hersd/engine/envs/make.py", "success"), ("hersd/engine/render.py", "success"), ("analysis/metrics.py", "success")}
-
-
-def test_kind_names_are_literals_only_in_their_own_schedule_file():
-    """Every other layer asks the schedule (its class, its record) instead of matching on its kind."""
+def kind_literals(source: str, kinds) -> list[tuple[int, str]]:
+    """(line, name) where ``source`` writes a name of ``kinds`` as a schedule's kind: compared (==, !=, in) with an
+    expression that reads a kind (``x.kind``, ``x["kind"]``, a name holding "kind"), assigned to one, as a ``"kind"``
+    value or a ``kind=`` argument, as a key of a dict literal (a table by kind) or an index of ``SCHEDULES``. Other
+    strings that happen to equal a kind's name (Adam's state key 'step', an env's info key 'success') are not kinds."""
     import ast
-    from pathlib import Path
 
-    from hersd.contract.schedules import SCHEDULES
+    def reads_kind(node) -> bool:
+        return any(isinstance(part, ast.Attribute) and "kind" in part.attr or isinstance(part, ast.Name) and
+                   "kind" in part.id or isinstance(part, ast.Constant) and part.value == "kind"
+                   for part in ast.walk(node))
+
+    def literals(node) -> list:  # the kind names a node is, or holds as a tuple, list or set
+        elements = node.elts if isinstance(node, (ast.Tuple, ast.List, ast.Set)) else [node]
+        return [element for element in elements if isinstance(element, ast.Constant) and element.value in kinds]
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare) and any(reads_kind(side) for side in (node.left, *node.comparators)):
+            found += [literal for side in (node.left, *node.comparators) for literal in literals(side)]
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None and any(
+                reads_kind(target) for target in getattr(node, "targets", [getattr(node, "target", None)])):
+            found += literals(node.value)
+        elif isinstance(node, ast.Dict):
+            found += [literal for key in node.keys if key is not None for literal in literals(key)]
+            found += [literal for key, value in zip(node.keys, node.values)
+                      if isinstance(key, ast.Constant) and key.value == "kind" for literal in literals(value)]
+        elif isinstance(node, ast.keyword) and node.arg and "kind" in node.arg:
+            found += literals(node.value)
+        elif isinstance(node, ast.Subscript) and "SCHEDULES" in ast.unparse(node.value):
+            found += literals(node.slice)
+    return sorted({(literal.lineno, literal.value) for literal in found})
+
+
+def kind_literals_outside_their_files(kinds) -> list[str]:
+    """Every place of the tree's layers that writes a kind of ``kinds`` as a kind, outside that kind's own file."""
+    from pathlib import Path
 
     root = Path(__file__).resolve().parent.parent
     found = []
     for package in ("hersd", "sweeps", "analysis", "scripts"):
         for path in sorted((root / package).rglob("*.py")):
             name = path.relative_to(root).as_posix()
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-                if isinstance(node, ast.Constant) and node.value in SCHEDULES and (name, node.value) not in NOT_KINDS \
-                        and name != f"hersd/contract/schedules/{node.value}.py":
-                    found.append(f"{name}:{node.lineno} {node.value!r}")
-    assert not found
+            found += [f"{name}:{line} {kind!r}" for line, kind in kind_literals(path.read_text(encoding="utf-8"), kinds)
+                      if name != f"hersd/contract/schedules/{kind}.py"]
+    return found
+
+
+def test_kind_names_are_literals_only_in_their_own_schedule_file():
+    """Every other layer asks the schedule (its class, its record) instead of matching on its kind."""
+    from hersd.contract.schedules import SCHEDULES
+
+    assert not kind_literals_outside_their_files(SCHEDULES)
+
+
+def test_a_schedule_named_step_would_pass_the_kind_name_check():
+    """docs/ARCHITECTURE.md's example kind, ``step``: the tree's other 'step' (Adam's state key in
+    hersd/engine/learners/fast.py) is no kind; every way of matching on a kind is found."""
+    from hersd.contract.schedules import SCHEDULES
+
+    assert not kind_literals_outside_their_files({*SCHEDULES, "step"})
+    source = """if cfg.schedule.kind == "linear": pass
+titles = {"cosine": "Cosine"}
+record = {"kind": "step", "beta1": 0.5}
+built = make(kind="constant")
+cls = SCHEDULES["success"]
+if record["kind"] in ("table", "exponential"): pass
+kind = "step"
+adam = state["step"]; reached = info["success"]; renamed = {"test_success": "success"}"""
+    assert kind_literals(source, {*SCHEDULES, "step"}) == [
+        (1, "linear"), (2, "cosine"), (3, "step"), (4, "constant"), (5, "success"), (6, "exponential"), (6, "table"),
+        (7, "step")]
 
 
 def test_a_table_replaying_a_success_runs_log_computes_that_run_again(tmp_path):
@@ -359,3 +410,32 @@ def test_a_param_range_that_is_not_two_ordered_numbers_is_one_line(low, high):
     with pytest.raises(ConfigError, match=r"^param\(0\.5, .*\): its range must be two numbers, low <= high"):
         param(0.5, low, high, "the rate")
     assert param(3, 1, float("inf"), "epochs", integer=True).metadata["high"] == float("inf")
+
+
+@pytest.mark.parametrize("beta2, tag, label", [(0.0, "rising-b1_0.25", "rising b1=0.25"),
+                                               (0.25, "rising-b1_0.25-b2_0.25", "rising b1=0.25 b2=0.25")])
+def test_the_rising_schedule_is_the_decays_rates_in_reverse_order_with_its_mean_rate(beta2, tag, label):
+    """eps_rev(k) = eps(K + 1 - k) of the linear (beta2 = 0) and exponential decay: the same multiset of K rates,
+    the same mean rate (eq. 10), a folder and a label of its own."""
+    from hersd.contract.schedules import Exponential, Rising, settle
+
+    total = 200
+    rising = settle(Rising(beta1=0.25, beta2=beta2), total)
+    decay = Exponential(beta1=0.25, beta2=beta2).equivalent()
+    assert np.array_equal(rising.epoch_rates(total), decay.epoch_rates(total)[::-1])
+    assert sorted(rising.epoch_rates(total)) == sorted(decay.epoch_rates(total))
+    assert (rising.rate(1, total), rising.rate(total, total)) == pytest.approx((0.75, 1 - 0.25 * (1 / total) ** math.exp(beta2)))
+    assert abs(rising.exact_mean_rate(total) - decay.exact_mean_rate(total)) < 1e-12
+    assert abs(np.mean(rising.epoch_rates(total)) - decay.exact_mean_rate(total)) < 1e-12
+    assert (rising.tag(), rising.label()) == (tag, label) and tag not in (decay.tag(), "linear-b1_0.25")
+
+
+def test_the_rising_preset_is_linear_025_reversed_and_the_late_rate_preset_is_constant_075():
+    from hersd.contract.compose import compose_train
+
+    rising = compose_train(["schedule=rising_linear_025"]).schedule
+    decay = compose_train(["schedule=paper_linear_025"]).schedule
+    assert rising.tag() == "rising-b1_0.25" and rising.exact_mean_rate(200) == pytest.approx(0.874375, abs=1e-12)
+    assert np.array_equal(rising.epoch_rates(200), decay.epoch_rates(200)[::-1])
+    late = compose_train(["schedule=constant_075"]).schedule
+    assert (late.tag(), late.exact_mean_rate(200)) == ("constant-0.75", 0.75) == (late.tag(), decay.rate(200, 200))

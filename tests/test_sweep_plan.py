@@ -93,15 +93,18 @@ def test_the_bf16_campaign_trains_her_seeds_0_to_4_in_folders_apart_from_the_com
             listed("+grid=bf16_push", "hydra/launcher=slurm", f"results_dir={tmp_path}")]
     assert [(run.parent, run.name.split("-")[0]) for run in runs] == \
         [(Path("push/her/constant-0.8"), f"seed{seed}") for seed in range(5)]
-    fp32 = {path.name for path in (RESULTS / "push/her/constant-0.8").iterdir()}
-    assert fp32 and not fp32 & {run.name for run in runs}
+    from hersd.contract.runlog import read_records
+
+    fp32 = {path.parent.name for path in (RESULTS / "push/her/constant-0.8").glob("*/run.mcap")  # bf16 ones land here
+            if read_records(path).meta["config"].get("precision", "fp32") == "fp32"}
+    assert len(fp32) == 10 and not fp32 & {run.name for run in runs}
 
 
 @pytest.mark.parametrize("args, seeds", [
     (["task=reach", "epochs=1", "seeds=3"], [0, 1, 2]),  # no grid: seeds=N is N runs
     (["task=reach", "seeds=3", "schedule=linear", "schedule.beta1=0.5,0.7"], [0, 0, 1, 1, 2, 2]),  # seed by seed
-    (["task=reach", "seeds=3", "seed=4"], [4]),  # the command's seed wins
-    (["+grid=smoke", "seeds=3", "seed=1,2"], [1, 1, 2, 2]),
+    (["task=reach", "seed=4"], [4]),  # the command's seed, not range(seeds); seeds= with seed= is refused
+    (["+grid=smoke", "seed=1,2"], [1, 1, 2, 2]),
 ])
 def test_seeds_sweeps_seed_unless_the_command_sets_it(tmp_path, args, seeds):
     runs = [Path(directory) for _, directory in listed(*args, f"results_dir={tmp_path}")]
@@ -143,6 +146,7 @@ main()
     ["+grid=iso_mu", "task=pick_and_place", "seeds=1", "schedule.mean_rate=0.85"],
     ["+grid=pnp_push_paper"],
     ["+grid=push_paper_campaign"],
+    ["+grid=decay_shape", "hydra/launcher=slurm"],
     ["task=reach", "seeds=2", "learner=td3,sac", "ddpg.batch_size=64", "hydra/launcher=submitit_local"],
 ])
 def test_each_planned_config_is_the_one_hydra_composes_for_the_job(tmp_path, args):
@@ -154,3 +158,46 @@ def test_each_planned_config_is_the_one_hydra_composes_for_the_job(tmp_path, arg
     checked = [line for line in done.stdout.splitlines() if line.startswith("checked:")]
     listed_count = int(done.stdout.split("sweep: ", 1)[1].split(" runs", 1)[0])
     assert len(checked) >= listed_count >= 2
+
+
+def test_the_decay_shape_campaign_starts_with_the_bf16_runs_then_takes_its_stages_in_order(tmp_path):
+    """Stage 1 is conf/grid/bf16_push.yaml's runs (the same folders, training now); then the rising linear 0.25 and
+    the constant 0.75 on FetchPickAndPlace seed by seed, the exponential 0.25 on FetchPush, ARCHER on
+    FetchPickAndPlace (HER's rate and the linear decay)."""
+    slurm = ("hydra/launcher=slurm", f"results_dir={tmp_path}")  # its nodes decide what they can train
+    runs = [Path(directory).relative_to(tmp_path) for _, directory in listed("+grid=decay_shape", *slurm)]
+    bf16 = [Path(directory).relative_to(tmp_path) for _, directory in listed("+grid=bf16_push", *slurm)]
+    assert len(runs) == len(set(runs)) == 30 and runs[:5] == bf16
+    arms = [(run.parts[0], run.parts[1], run.parts[2], int(run.name.split("-")[0].removeprefix("seed")))
+            for run in runs[5:]]
+    assert arms == [("pick_and_place", "her", arm, seed) for seed in range(5)
+                    for arm in ("rising-b1_0.25", "constant-0.75")] + \
+        [("push", "her", "exponential-b1_0.25-b2_0.25", seed) for seed in range(5)] + \
+        [("pick_and_place", "archer", arm, seed) for seed in range(5) for arm in ("constant-0.8", "linear-b1_0.25")]
+
+
+SWEEP_WITHOUT_BF16 = "from hersd.engine import resources; resources.cpu_has_bf16 = lambda: False\n" \
+    "from sweeps.launch import main; main()"
+
+
+def test_on_a_cpu_without_bf16_each_bf16_run_is_skipped_in_one_line_and_the_campaign_goes_on(tmp_path):
+    """bf16_push alone is refused (exit 2, one line); decay_shape skips its five bf16 runs, one line each, and
+    lists the other 25 to train."""
+    def dry_run(grid: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", SWEEP_WITHOUT_BF16, f"+grid={grid}", f"results_dir={tmp_path}",
+                               "--dry-run"], capture_output=True, text=True, timeout=300)
+
+    refused = dry_run("bf16_push")
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    assert "precision=bf16: this CPU has no bf16 instructions" in refused.stderr
+    goes_on = dry_run("decay_shape")
+    assert goes_on.returncode == 0, goes_on.stderr
+    skipped = [line for line in goes_on.stdout.splitlines() if line.startswith("sweep: skipped ")]
+    assert len(skipped) == 5 and all(line.endswith("precision=bf16: this CPU has no bf16 instructions "
+                                                   "(avx512_bf16, amx_bf16); use precision=fp32") for line in skipped)
+    assert [line.split()[2].removesuffix(":") for line in skipped] == \
+        [str(tmp_path / "push/her/constant-0.8" / Path(d).name) for _, d in listed("+grid=bf16_push",
+                                                                                   "hydra/launcher=slurm",
+                                                                                   f"results_dir={tmp_path}")]
+    planned = [line.split()[1] for line in goes_on.stdout.splitlines() if line.startswith("  ")]
+    assert len(planned) == 25 and "rising-b1_0.25" in planned[0]

@@ -116,7 +116,7 @@ class Schedule:
             rate = rate.item()
         is_number = isinstance(rate, numbers.Real) and not isinstance(rate, bool)  # numpy's scalars too
         if not (is_number and 0.0 <= rate <= 1.0):  # NaN fails too
-            shown = rate if is_number else f"{rate!r}, a {type(rate).__name__}"
+            shown = shown_rate(float(rate)) if is_number else f"{rate!r}, a {type(rate).__name__}"
             raise ScheduleRateError(f"schedule {self.label()}: its rate at epoch {k} of {total_epochs} is {shown}, "
                                     f"not in [0, 1]; fix {kind_name(type(self))}.rate")
         return float(rate)
@@ -181,6 +181,13 @@ def kind_name(cls: type[Schedule]) -> str:
 def short_name(cls: type[Schedule]) -> str:
     """A schedule class's name in default tags and labels: its kind, else its class name in lower case."""
     return cls.__dict__.get("kind") or cls.__name__.lower()
+
+
+def shown_rate(rate: float) -> str:
+    """A rate outside [0, 1] for messages, rounded (-0.05, not -0.04999999999999993) unless rounding would put it
+    inside."""
+    rounded = f"{rate:.6g}"
+    return repr(rate) if 0.0 <= float(rounded) <= 1.0 else rounded
 
 
 def shown_value(value: Any) -> str:

@@ -14,11 +14,13 @@ from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.cosine import Cosine
 from hersd.contract.schedules.exponential import Exponential
 from hersd.contract.schedules.linear import Linear
+from hersd.contract.schedules.rising import Rising
 from hersd.contract.schedules.success import Success
 from hersd.contract.schedules.table import Table
 
 # The package's kinds, in the order of reports and tables.
-SCHEDULES: dict[str, type[Schedule]] = {cls.kind: cls for cls in (Constant, Linear, Exponential, Success, Cosine, Table)}
+SCHEDULES: dict[str, type[Schedule]] = {cls.kind: cls for cls in (Constant, Linear, Exponential, Rising, Success, Cosine,
+                                                                      Table)}
 DEFAULT = Constant  # the schedule of a config that names none (HER)
 ENTRY_POINT_GROUP = "hersd.schedules"
 TARGET_KEY = "_target_"
@@ -58,6 +60,10 @@ def schedule_class(kind: str) -> type[Schedule]:
             what = "setting" if "doc" in item.metadata else "field"
             raise ConfigError(f"schedule {kind}: its {what} {item.name} shadows Schedule.{item.name}, which hersd "
                               f"{'calls' if callable(getattr(Schedule, item.name)) else 'reads'}; rename the {what}")
+        if "doc" not in item.metadata and item.init and item.name not in dir(Schedule):  # (title: str = ...: read)
+            raise ConfigError(f"schedule {kind}: its field {item.name} is no setting; declare it with "
+                              f"param(default, low, high, \"doc\") (from hersd.contract.schedules import param), or "
+                              f"with field(init=False) if it is not one")
     if cls.rate is Schedule.rate:
         raise ConfigError(f"schedule {kind} defines no rate(self, k, total_epochs, train_success=()); "
                           "a schedule needs it (tag and label have defaults)")
