@@ -5,8 +5,11 @@ errors, schedules, tasks, run log, run folder, study encoding; neither torch nor
 one training run, which imports the contract and never the reverse. Importing the package is cheap.
 
 A module's path from before that split (:data:`MOVED`, e.g. ``hersd.runlog``, ``hersd.schedules.linear``) still
-imports, as the very module of its new path: one module object under both names, so classes, ``isinstance``,
-``_target_`` strings and pickled checkpoints that name the old path keep working.
+imports until hersd :data:`OLD_PATHS_REMOVED_IN`, with a ``FutureWarning`` naming its new path: an old module is the
+very module of its new path (so classes, ``isinstance``, ``_target_`` strings and pickles that name the old path
+keep working); an old package (``hersd.schedules``) is a stand-in whose names are the new package's, so the new
+packages are never changed by it (``hersd.envs.tasks`` is the contract's, ``hersd.engine.envs`` stays without one).
+The finder answering those names is the last of ``sys.meta_path``: asked only of names no module of the tree has.
 """
 
 from __future__ import annotations
@@ -15,8 +18,11 @@ import importlib
 import importlib.abc
 import importlib.util
 import sys
+import types
+import warnings
 
 __version__ = "0.1.0"
+OLD_PATHS_REMOVED_IN = "0.2.0"  # the release without MOVED: its old paths then fail to import
 
 # The path of each module (a package: with its submodules) before the split -> its path now.
 MOVED = {
@@ -49,31 +55,63 @@ def moved_to(name: str) -> str | None:
     return None if old is None else MOVED[old] + name[len(old):]
 
 
+def _warn(old: str, new: str) -> None:
+    """The FutureWarning of importing ``old``, at the line that imports it (importlib's own frames are skipped)."""
+    warnings.warn(f"{old} is {new} now: import {new} (the old path goes in hersd {OLD_PATHS_REMOVED_IN})",
+                  FutureWarning, stacklevel=3)
+
+
+def _old_package(old: str, package: types.ModuleType) -> types.ModuleType:
+    """The stand-in of the moved package ``package`` under its old path ``old``: no ``__path__`` of the tree (so its
+    submodules are asked of :class:`OldPaths`, never loaded twice); each name is the old child's or the package's."""
+    stand_in = types.ModuleType(old, package.__doc__)
+    stand_in.__path__ = []
+
+    def __getattr__(name: str):
+        if name.startswith("__"):  # the stand-in's own (no __file__: it is no file)
+            raise AttributeError(f"module {old!r} has no attribute {name!r}")
+        child = moved_to(f"{old}.{name}")
+        try:
+            is_module = importlib.util.find_spec(child) is not None
+        except (ImportError, ValueError):
+            is_module = False
+        if not is_module:
+            return getattr(package, name)
+        _warn(f"{old}.{name}", child)
+        module = sys.modules[f"{old}.{name}"] = importlib.import_module(child)
+        setattr(stand_in, name, module)
+        return module
+
+    stand_in.__getattr__ = __getattr__
+    stand_in.__dir__ = lambda: dir(package)
+    return stand_in
+
+
 class OldPaths(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Imports an old path as the module of its new path (imported first if need be), not as a copy."""
+    """Imports an old path (warning once, naming its new one): a module as the module of its new path, a package as
+    its stand-in."""
 
     def find_spec(self, name, path=None, target=None):  # noqa: ARG002 - the finder protocol's signature
-        return importlib.util.spec_from_loader(name, self) if moved_to(name) else None
+        new = moved_to(name)
+        if new is None:
+            return None
+        module = importlib.import_module(new)
+        _warn(name, new)
+        return importlib.util.spec_from_loader(name, self, is_package=hasattr(module, "__path__"))
 
     def create_module(self, spec):
         module = importlib.import_module(moved_to(spec.name))
+        if hasattr(module, "__path__"):
+            return _old_package(spec.name, module)
         spec.loader_state = module.__spec__  # the import system sets __spec__ to the old path's: put back below
         return module
 
     def exec_module(self, module):
-        old = module.__spec__.name
-        module.__spec__ = module.__spec__.loader_state
-        moved_elsewhere = {child.rpartition(".")[2] for child in MOVED if child.rpartition(".")[0] == old
-                           and moved_to(child) != f"{module.__name__}.{child.rpartition('.')[2]}"}
-        if moved_elsewhere and not hasattr(module, "__getattr__"):  # from hersd.envs import tasks (now contract's)
-            def __getattr__(name):
-                if name in moved_elsewhere:
-                    return importlib.import_module(f"{old}.{name}")
-                raise AttributeError(f"module {module.__name__!r} has no attribute {name!r}")
-            module.__getattr__ = __getattr__
+        if module.__spec__.loader_state is not None:
+            module.__spec__ = module.__spec__.loader_state
 
     def get_code(self, name):  # python -m <old path>
         return importlib.util.find_spec(moved_to(name)).loader.get_code(moved_to(name))
 
 
-sys.meta_path.insert(0, OldPaths())
+sys.meta_path.append(OldPaths())

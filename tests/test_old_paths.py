@@ -1,6 +1,8 @@
 """hersd/__init__.py's table of moved modules: every path from before the split into hersd/contract and hersd/engine
-that users' code, the docs, the conf YAMLs and the committed logs name imports as the very object of its new path;
-a run's folder does not depend on the path its schedule is named by; checkpoints name no module of hersd."""
+that users' code, the docs, the conf YAMLs and the committed logs name imports, with a FutureWarning naming its new
+path, as the very object of its new path (a package: a stand-in whose names are the new package's, the new package
+unchanged); no new log names an old path; a run's folder does not depend on the path its schedule is named by;
+checkpoints name no module of hersd."""
 
 from __future__ import annotations
 
@@ -17,8 +19,10 @@ from pathlib import Path
 import pytest
 from helpers import TINY
 
+import hersd
 from hersd import MOVED, moved_to
 from hersd.contract.compose import compose_train
+from hersd.contract.runlog import CHANNELS
 from hersd.contract.runstore import config_hash, run_dir
 from hersd.contract.schedules import Schedule, schedule_from_config
 from hersd.contract.schedules.linear import Linear
@@ -34,6 +38,8 @@ hersd.runstore.NOT_HASHED hersd.runstore.RunFolder.animations hersd.runstore.Run
 hersd.runstore.RunLockedError hersd.runstore.run_identity hersd.schedules.Constant hersd.schedules.MU_EPS_BAND
 hersd.schedules.SCHEDULES hersd.schedules.Schedule hersd.schedules.param hersd.train.train
 hersd.schedules.base.Schedule hersd.schedules.linear.Linear hersd.schedules.exponential.Exponential""".split()
+# What the schemas of logs written before the change name (every committed log has been rewritten since).
+OLD_LOGS = "hersd.runstore.config_hash hersd.run_state.RunState.effective_totals hersd.resources.machine_info".split()
 
 
 def committed_names() -> set[str]:
@@ -75,18 +81,69 @@ def resolved(dotted: str):
     raise ImportError(dotted)
 
 
-@pytest.mark.parametrize("old", sorted({*DOCUMENTED, *every_old_module(), *committed_names()}))
+def old_names(text: str) -> set[str]:
+    """The paths from before the split ``text`` names, dotted (``hersd.runstore.config_hash``) or as a file
+    (``hersd/config.py``)."""
+    dotted = set(re.findall(r"hersd(?:\.\w+)+", text))
+    files = {name.replace("/", ".").removesuffix(".py") for name in re.findall(r"hersd(?:/\w+)+(?:\.py)?", text)}
+    return {name for name in dotted | files if moved_to(name)}
+
+
+@pytest.mark.filterwarnings("ignore::FutureWarning")
+@pytest.mark.parametrize("old", sorted({*DOCUMENTED, *OLD_LOGS, *every_old_module(), *committed_names()}))
 def test_an_old_path_gives_the_object_of_its_new_path(old):
-    assert resolved(old) is resolved(moved_to(old))
+    """A module or a name in one is the very object; an old package is a stand-in giving the new package's names."""
+    got, new = resolved(old), resolved(moved_to(old))
+    if hasattr(new, "__path__"):
+        names = [name for name in dir(new) if not name.startswith("__")]
+        assert names and all(getattr(got, name) is getattr(new, name) for name in names)
+    else:
+        assert got is new
 
 
-def test_the_committed_logs_name_their_old_paths():
-    """The logs' schemas name where their values come from by the old paths (this test's list would miss them)."""
-    assert {"hersd.runstore.config_hash", "hersd.resources.machine_info"} <= committed_names()
+def test_an_old_path_warns_naming_its_new_path_and_changes_no_new_package():
+    """In a fresh interpreter: a FutureWarning at the importing line for each old path, naming the new one and the
+    release that drops it; after ``import hersd.envs`` and its contract child, ``hersd.engine.envs`` holds no
+    ``tasks`` (the contract's) and the finder is asked after the path finder (only of names the tree lacks)."""
+    code = """import sys, warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    import hersd.runlog
+    import hersd.envs.tasks
+    from hersd.learners import td3
+import hersd, hersd.engine.envs, hersd.contract.tasks, hersd.engine.learners.td3
+assert hersd.envs.tasks is hersd.contract.tasks and td3 is hersd.engine.learners.td3
+assert not hasattr(hersd.engine.envs, "tasks"), "the engine's package was changed"
+from importlib.machinery import PathFinder
+finder = next(finder for finder in sys.meta_path if type(finder).__name__ == "OldPaths")
+assert sys.meta_path.index(finder) > sys.meta_path.index(PathFinder), "asked before the tree's own modules"
+for warning in caught:
+    print(warning.category.__name__, warning.filename, warning.lineno, warning.message)"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    removed = f"the old path goes in hersd {hersd.OLD_PATHS_REMOVED_IN}"
+    moves = [(4, "hersd.runlog", "hersd.contract.runlog"), (5, "hersd.envs", "hersd.engine.envs"),
+             (5, "hersd.envs.tasks", "hersd.contract.tasks"), (6, "hersd.learners", "hersd.engine.learners"),
+             (6, "hersd.learners.td3", "hersd.engine.learners.td3")]
+    assert done.stdout.splitlines() == [f"FutureWarning <string> {line} {old} is {new} now: import {new} ({removed})"
+                                        for line, old, new in moves]
 
 
-def test_an_old_path_imported_first_in_a_fresh_interpreter_is_one_module_under_two_names():
-    code = """import pickle, sys
+def test_a_new_logs_schemas_name_no_old_path():
+    """What a new log holds besides its records: its channels' JSON schemas, their descriptions included."""
+    assert CHANNELS and not [old_names(schema.decode()) for _name, schema in CHANNELS.values() if
+                             old_names(schema.decode())]
+
+
+def test_the_committed_logs_and_configs_name_no_old_path():
+    """The committed logs' schemas name the modules by their new paths: landed again after the change
+    (scripts/land.py writes the current schemas, every message unchanged), as the conf YAMLs' ``_target_``s do."""
+    assert committed_names() == set()
+
+
+def test_an_old_path_imported_first_in_a_fresh_interpreter_is_the_module_of_its_new_path():
+    code = """import pickle, sys, warnings
+warnings.simplefilter("ignore", FutureWarning)
 import hersd.schedules.linear as old
 from hersd.schedules.base import Schedule
 import hersd.contract.schedules.linear as new
@@ -99,6 +156,7 @@ print("ok")"""
     assert done.stdout.strip() == "ok", done.stderr
 
 
+@pytest.mark.filterwarnings("ignore::FutureWarning")
 def test_a_schedule_subclassed_through_an_old_path_is_one_of_the_new():
     base = importlib.import_module("hersd.schedules.base")
 
@@ -109,6 +167,7 @@ def test_a_schedule_subclassed_through_an_old_path_is_one_of_the_new():
     assert isinstance(Half(), Schedule) and isinstance(Linear(), base.Schedule)
 
 
+@pytest.mark.filterwarnings("ignore::FutureWarning")
 @pytest.mark.parametrize("target", ["hersd.schedules.linear.Linear", "hersd.contract.schedules.linear.Linear"])
 def test_a_schedule_named_by_either_path_keeps_the_runs_folder(target):
     """A run's identity holds the kind a schedule declares, not its module: naming the class by its old or new path
@@ -121,7 +180,8 @@ def test_a_schedule_named_by_either_path_keeps_the_runs_folder(target):
 
 def test_a_checkpoint_names_no_module_of_hersd(tmp_path):
     """What a checkpoint pickles (networks, optimisers, buffer, RNG states, MEP's fitted mixture) names torch, numpy
-    and scikit-learn only, so a checkpoint written under one layout of hersd resumes under another."""
+    and scikit-learn only, so a checkpoint written under one layout of hersd resumes under another; the run's new
+    log names no old path."""
     from hersd.engine.train import train
 
     class Stop(Exception):
@@ -140,6 +200,7 @@ def test_a_checkpoint_names_no_module_of_hersd(tmp_path):
     globals_ = [arg for op, arg, _ in pickletools.genops(io.BytesIO(data)) if op.name == "GLOBAL"]
     assert globals_ and not [name for name in globals_ if name.split()[0].split(".")[0] == "hersd"], globals_
     assert any(name.startswith("sklearn") for name in globals_)  # MEP's mixture, fitted at epoch 2
+    assert not old_names((run_dir(cfg) / "run.mcap").read_bytes().decode("latin-1"))  # a new log names no old path
 
 
 def test_every_old_module_imports_by_from_its_parent_and_runs_by_python_m():

@@ -127,7 +127,7 @@ def test_bf16_ddpg_learns_fetch_reach(tmp_path):
 
 def test_a_bf16_runs_policy_renders_on_a_cpu_without_bf16_instructions(monkeypatch):
     """hersd-render builds the run's learner only to act, which is float32 at either precision."""
-    from hersd.engine.render import policy_from_checkpoint
+    from hersd.engine.render_cli import policy_from_checkpoint
 
     cfg = compose_train(["task=reach", "precision=bf16"])
     monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)

@@ -1,9 +1,12 @@
-"""Policy animations (hersd/engine/render.py): rendering changes nothing a run computes, the GIF shows the
-scene, hersd-render draws a checkpoint's epoch as training did, and every failure is one line."""
+"""Policy animations (hersd/engine/render.py) and hersd-render (hersd/engine/render_cli.py): rendering changes
+nothing a run computes, the GIF shows the scene, hersd-render draws a checkpoint's epoch as training did, a run
+stopped while rendering draws that animation when resumed, and every failure is one line leaving no file."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import errno
 
 import numpy as np
 import pandas as pd
@@ -15,8 +18,9 @@ from user_learners import LATE
 import hersd.engine.render
 import hersd.engine.train
 from hersd.contract.compose import compose_train
-from hersd.engine.render import RenderError, close_render_env, headless_backend, main, make_render_env, renders_at
-from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder
+from hersd.engine.render import RenderError, close_render_env, headless_backend, make_render_env, renders_at
+from hersd.engine.render_cli import main
+from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder, run_dir
 from hersd.engine.train import train
 
 RUN = [*(o for o in TINY if o != "render_every=0"), "epochs=2", "seed=5", "quiet=true", "threads=1"]
@@ -71,7 +75,7 @@ def test_hersd_render_draws_a_run_of_an_outside_learner_with_settings_of_its_own
                                                  "learner._target_=user_late.TD3Late", "learner.td3late.actor_start=2"],
                       tmp_path)
     directory = Path(trained.stdout.strip().splitlines()[-1]).parent
-    drawn = command("hersd.engine.render:main", [str(directory), "--out", str(tmp_path / "late.gif")], tmp_path)
+    drawn = command("hersd.engine.render_cli:main", [str(directory), "--out", str(tmp_path / "late.gif")], tmp_path)
     assert f"{tmp_path / 'late.gif'} (epoch 1, 52 frames" in drawn.stdout
 
 
@@ -100,6 +104,59 @@ def test_hersd_render_refuses_an_out_it_cannot_write_in_one_line(runs, tmp_path,
         err = capsys.readouterr().err
         assert expected in err and err.count("\n") == 1, err
     assert sorted(path.name for path in tmp_path.iterdir()) == ["file"]
+
+
+def full_disk(monkeypatch) -> None:
+    """Writing a GIF fails as on a full disk, after the first bytes of its temporary file."""
+    def save(image, path, *args, **kwargs):
+        Path(path).write_bytes(b"GIF89a")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(hersd.engine.render.Image.Image, "save", save)
+
+
+def test_hersd_render_on_a_full_disk_is_one_line_naming_the_gif_and_leaves_no_file(runs, tmp_path, monkeypatch,
+                                                                                    capsys):
+    full_disk(monkeypatch)
+    out = tmp_path / "full.gif"
+    assert exit_code([str(runs["1"].parent), "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"hersd-render: error: cannot write {out}: No space left on device\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_while_training_renders_is_a_warning_naming_the_gif_and_leaves_no_file(tmp_path, monkeypatch,
+                                                                                           capsys):
+    full_disk(monkeypatch)
+    log = train(compose_train([*RUN, "epochs=1", "render_every=1", f"results_dir={tmp_path}"]))
+    err = capsys.readouterr().err
+    gif = RunFolder(log.parent).animation(1)
+    assert err.count("\n") == 1 and f"epoch 1: no policy animation: OSError: [Errno {errno.ENOSPC}] No space" in err
+    assert str(gif) in err and list(gif.parent.iterdir()) == []
+
+
+def test_a_run_stopped_while_rendering_draws_that_animation_when_resumed(runs, tmp_path, monkeypatch):
+    """Killed during epoch 1's render (after its checkpoint), a 0-byte ``epoch_1.gif.partial`` left: the resumed
+    run removes it and draws epoch 1's animation first, the same GIF an uninterrupted run drew."""
+    class Killed(BaseException):
+        pass
+
+    def killed(agent, cfg, epoch, path, *args):
+        Path(f"{path}.partial").parent.mkdir(parents=True, exist_ok=True)
+        Path(f"{path}.partial").write_bytes(b"")
+        raise Killed
+
+    args = [*RUN, "render_every=1", "keep_checkpoint=true", f"results_dir={tmp_path}"]
+    monkeypatch.setattr(hersd.engine.train, "render_policy", killed)
+    with pytest.raises(Killed):
+        train(compose_train(args))
+    folder = RunFolder(runs["1"].parent)
+    resumed = RunFolder(run_dir(compose_train(args)))
+    assert [path.name for path in resumed.animation(1).parent.iterdir()] == ["epoch_1.gif.partial"]
+    monkeypatch.undo()
+    train(compose_train(args))
+    assert sorted(path.name for path in resumed.animation(1).parent.iterdir()) == ["epoch_1.gif", "epoch_2.gif"]
+    assert all(resumed.animation(k).read_bytes() == folder.animation(k).read_bytes() for k in (1, 2))
+    pd.testing.assert_frame_equal(metrics(resumed.log), metrics(folder.log))
 
 
 def test_hersd_render_needs_a_run_with_a_checkpoint(tmp_path, capsys):
@@ -163,7 +220,7 @@ def test_a_render_env_collected_late_leaves_later_renders_alone():
 def test_every_committed_log_gives_back_the_config_of_its_folder():
     """hersd-render reads a run's config from its log: for every committed log (the paper's kinds log the flat
     schema's fields besides their own) that config maps to the log's own folder."""
-    from hersd.engine.render import config_from_log
+    from hersd.engine.render_cli import config_from_log
     from hersd.contract.runlog import read_run
     from hersd.contract.runstore import run_dir
 

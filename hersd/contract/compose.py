@@ -80,7 +80,8 @@ def compose_train(overrides: list[str]) -> TrainConfig:
 
 
 def group_options(group: str) -> list[str]:
-    """The config names of a group (e.g. ``task`` -> ``[pick_and_place, push, reach, slide]``)."""
+    """The config names of a group, sorted (e.g. ``task`` -> ``[custom, hand_block, hand_reach, pick_and_place, push,
+    reach, slide]``)."""
     from importlib.resources import files
 
     folder = files(CONFIG_MODULE).joinpath(*group.split("/"))

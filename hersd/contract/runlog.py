@@ -46,13 +46,14 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from hersd import __version__
+from hersd.contract.errors import DiskFullError, full_disk
 
 LOG_NAME = "run.mcap"
 LIBRARY = f"hersd {__version__}; mcap-python {mcap.__version__}"  # the MCAP header's library string
 
 # name -> (JSON type, description). Optional fields are absent where they have no value. The descriptions
-# are part of every log's schema: they keep the module paths of the logs already written (hersd/__init__.py
-# maps each to its module now), so a new log's schema equals theirs and no committed log is rewritten.
+# are part of every log's schema and name modules by their paths now; logs written before the split into
+# hersd/contract and hersd/engine name the old paths (hersd/__init__.py's MOVED), records unchanged.
 EPOCH_FIELDS: dict[str, tuple[str, str]] = {
     "epoch": ("integer", "epoch index k, 1..K"),
     "relabel_rate": ("number", "eps(k): probability that a sampled goal is replaced in hindsight"),
@@ -84,14 +85,15 @@ EPOCH_FIELDS: dict[str, tuple[str, str]] = {
     "q_hindsight_mean": ("number", "mean critic Q(s, a) over this epoch's training rows whose goal was relabelled "
                                    "(absent if none, or in logs written before it was recorded)"),
     **{f"{part}_{goal}_{stat}": ("integer" if stat == "count" else "number", f"bias evaluation ({goal} goals): {doc} "
-                                 "(hersd/bias.py; absent at epochs without one)")
+                                 "(hersd/engine/bias.py; absent at epochs without one)")
        for goal in ("real", "hindsight", "moved")
        for part, stat, doc in (("bias", "mean", "mean of Q(s, pi(s, g), g) minus the policy's discounted return"),
                                ("bias", "std", "standard deviation of Q minus return"),
                                ("bias", "count", "(state, goal) pairs evaluated"),
                                ("return", "mean", "mean discounted return the policy obtains for g"))},
     "bias_hindsight_zero_share": ("number", "bias evaluation: share of the hindsight pairs whose return is exactly 0 "
-                                            "(goals already achieved; hersd/bias.py; absent at epochs without one)"),
+                                            "(goals already achieved; hersd/engine/bias.py; absent at epochs without "
+                                            "one)"),
     "bias_seconds": ("number", "seconds spent on the bias evaluation this epoch (absent at epochs without one)"),
 }
 # Fields a record may lack (absent from the message; read back as None): MEP's, SAC's, and those added
@@ -118,8 +120,8 @@ EPOCH_SCHEMA_DICT = {"title": "hersd.Epoch", **_object(
 
 # name -> JSON schema of every field a /run/meta message may carry (those written before a field existed lack it).
 META_FIELDS: dict[str, dict[str, Any]] = {
-    "run_id": _typed("string", "the run's hash, hersd.runstore.config_hash(config): its folder name's suffix"),
-    "config": _object({}, "the resolved TrainConfig (hersd/config.py) as nested objects, verbatim: its nulls "
+    "run_id": _typed("string", "the run's hash, hersd.contract.runstore.config_hash(config): its folder name's suffix"),
+    "config": _object({}, "the resolved TrainConfig (hersd/contract/config.py) as nested objects, verbatim: its nulls "
                           "are settings left unset; hersd-train --help describes every key"),
     "seed": _typed("integer", "the run's seed"),
     "versions": _object({name: _typed("string", f"{name} version") for name in (
@@ -143,7 +145,8 @@ META_FIELDS: dict[str, dict[str, Any]] = {
         "updates_per_env_step": _typed("number", "gradient updates per exploration step"),
         "test_episodes_per_epoch": _typed("integer", "deterministic test episodes per epoch"),
         "buffer_episodes": _typed("integer", "replay buffer capacity in episodes")},
-        "totals that make runs comparable whatever the worker layout (hersd.run_state.RunState.effective_totals)"),
+        "totals that make runs comparable whatever the worker layout "
+        "(hersd.engine.run_state.RunState.effective_totals)"),
     "threads": _typed("integer", "torch threads of this session"),
     "device": _typed("string", "torch device of this session, e.g. cpu"),
     "machine": _object({
@@ -152,7 +155,7 @@ META_FIELDS: dict[str, dict[str, Any]] = {
         "machine": _typed("string", "machine architecture, e.g. x86_64"),
         "torch_cpu_capability": _typed("string", "instruction set torch's CPU kernels use, e.g. AVX2"),
         "cuda_device": _typed("string", "CUDA device name (absent without CUDA)")},
-        "the machine of this session (hersd.resources.machine_info)"),
+        "the machine of this session (hersd.engine.resources.machine_info)"),
 }
 META_REQUIRED = ("run_id", "config", "seed", "versions", "command", "start_time", "resumed_from_epoch")
 META_NULLABLE = ("git_commit",)  # read back as None where absent, as the writer was given it
@@ -218,13 +221,21 @@ def encode_log(messages: Iterable[LoggedMessage]) -> bytes:
 
 
 def replace_file(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: a temporary file next to it, fsync, rename, fsync of the folder."""
+    """Write ``data`` to ``path`` atomically: a temporary file next to it, fsync, rename, fsync of the folder.
+    A write that fails leaves ``path`` as it was and no temporary file; on a full disk it raises
+    :class:`DiskFullError` (one line: the file, the bytes it needs, those free)."""
     temporary = path.with_name(path.name + ".tmp")
-    with open(temporary, "wb") as stream:
-        stream.write(data)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(temporary, path)
+    try:
+        with open(temporary, "wb") as stream:
+            stream.write(data)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
+    except BaseException as err:
+        temporary.unlink(missing_ok=True)
+        if full_disk(err):
+            raise DiskFullError(path, len(data)) from None
+        raise
     folder = os.open(path.parent, os.O_RDONLY)
     try:
         os.fsync(folder)

@@ -1,12 +1,13 @@
 """Animations of a policy: deterministic test episodes rendered headless into a small GIF.
 
 Training writes ``<run dir>/policy/epoch_<k>.gif`` every ``render_every`` epochs and at the
-last one (:func:`renders_at`), after the epoch is logged; ``hersd-render RUN_DIR`` renders
-from a run's checkpoint (:func:`main`). A render has its own env (``render_mode="rgb_array"``,
-a camera framed on the table) and its own random stream (a Generator seeded from the run's
-seed and the epoch): the run's envs, its RNGs and the torch RNG are untouched, so a run's
-metrics do not depend on whether it renders. The same run and epoch give the same episodes,
-whether training or ``hersd-render`` draws them.
+last one (:func:`renders_at`), after the epoch is logged and checkpointed; a run resumed after
+a stop during that render draws it first (:func:`owed_animation`). ``hersd-render RUN_DIR``
+renders from a run's checkpoint (:mod:`hersd.engine.render_cli`). A render has its own env
+(``render_mode="rgb_array"``, a camera framed on the table) and its own random stream (a
+Generator seeded from the run's seed and the epoch): the run's envs, its RNGs and the torch RNG
+are untouched, so a run's metrics do not depend on whether it renders. The same run and epoch
+give the same episodes, whether training or ``hersd-render`` draws them.
 
 Without ``MUJOCO_GL`` and without a display, :func:`headless_backend` picks EGL, else OSMesa,
 each tried first in a short subprocess: PyOpenGL's platform cannot change once it is loaded.
@@ -14,8 +15,6 @@ each tried first in a short subprocess: PyOpenGL's platform cannot change once i
 
 from __future__ import annotations
 
-import argparse
-import copy
 import functools
 import os
 import subprocess
@@ -26,18 +25,13 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-import torch
 from PIL import Image
 
-from hersd.contract.config import TaskConfig, TrainConfig, learner_node, to_train_config
-from hersd.contract.errors import ConfigError
-from hersd.engine.denormals import denormals_flushed, set_intra_op_threads
-from hersd.engine.learners import GoalConditionedLearner
+from hersd.contract.config import TaskConfig, TrainConfig
+from hersd.contract.runstore import POLICY_DIR, RunFolder
+from hersd.engine.denormals import denormals_flushed
 from hersd.engine.envs.make import env_spec, make_env, step_success
-from hersd.engine.run_state import discounting, load_checkpoint, make_agent
-from hersd.contract.runlog import LOG_NAME, RunLogError, read_run
-from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder
-from hersd.contract.schedules import schedule_from_record
+from hersd.engine.learners import GoalConditionedLearner
 
 DEFAULT_EPISODES = 2
 WIDTH, HEIGHT = 240, 180  # pixels of a frame
@@ -57,10 +51,6 @@ class RenderError(RuntimeError):
     """The policy could not be rendered; the message is one line saying why (and what to install)."""
 
 
-class RenderInputError(ValueError):
-    """``hersd-render`` was given a folder or epoch it cannot render (one line, exit 2)."""
-
-
 @dataclass
 class Animation:
     """A written GIF: its path, the seconds the render took, its frames and each episode's success."""
@@ -74,6 +64,20 @@ class Animation:
 def renders_at(render_every: int, epoch: int, epochs: int) -> bool:
     """Whether training animates the policy after ``epoch`` of ``epochs`` (every N-th and the last; 0: never)."""
     return render_every > 0 and (epoch % render_every == 0 or epoch == epochs)
+
+
+def partial_path(path: Path) -> Path:
+    """Where a GIF is written before it is renamed to ``path``: ``policy/epoch_<k>.gif.partial``."""
+    return path.with_name(path.name + ".partial")
+
+
+def owed_animation(folder: RunFolder, render_every: int, epochs_done: int, epochs: int) -> int | None:
+    """The epoch whose animation a run resumed after ``epochs_done`` still owes (it was stopped while rendering it,
+    after the epoch's checkpoint), or None; removes the GIFs a stopped render left half written."""
+    for stale in (folder.path / POLICY_DIR).glob("epoch_*.gif.partial"):
+        stale.unlink(missing_ok=True)
+    owed = epochs_done > 0 and renders_at(render_every, epochs_done, epochs)
+    return epochs_done if owed and not folder.animation(epochs_done).exists() else None
 
 
 # --------------------------------------------------------------------------- headless OpenGL
@@ -190,17 +194,22 @@ def render_frames(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int,
 
 
 def write_gif(frames: np.ndarray, durations: Sequence[int], path: Path) -> int:
-    """Frames (n, H, W, 3) uint8 -> a looping GIF at ``path`` (written whole, then renamed into place);
-    one palette of PALETTE_COLOURS for every frame. Returns its size in bytes."""
+    """Frames (n, H, W, 3) uint8 -> a looping GIF at ``path`` (written whole, then renamed into place; on an
+    OSError, e.g. a full disk, no file is left and the error names ``path``); one palette of PALETTE_COLOURS for
+    every frame. Returns its size in bytes."""
     sample = frames[:: max(1, len(frames) // 8)]  # the palette from a few frames spread over the episodes
     palette = Image.fromarray(sample.reshape(-1, frames.shape[2], 3)).quantize(
         PALETTE_COLOURS, method=Image.Quantize.FASTOCTREE)  # keeps the small red goal red
     images = [Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE) for frame in frames]
     path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    images[0].save(partial, format="GIF", save_all=True, append_images=images[1:], duration=list(durations),
-                   loop=0)
-    os.replace(partial, path)
+    partial = partial_path(path)
+    try:
+        images[0].save(partial, format="GIF", save_all=True, append_images=images[1:], duration=list(durations),
+                       loop=0)
+        os.replace(partial, path)
+    except OSError as err:
+        partial.unlink(missing_ok=True)
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from None
     return path.stat().st_size
 
 
@@ -211,105 +220,3 @@ def render_policy(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int, p
     frames, durations, successes = render_frames(agent, cfg, epoch, episodes)
     write_gif(frames, durations, path)
     return Animation(path, time.perf_counter() - start, len(frames), successes)
-
-
-# --------------------------------------------------------------------------- hersd-render
-def config_from_log(config: dict[str, Any]) -> TrainConfig:
-    """The TrainConfig of a log's ``/run/meta`` config dict (fields it lacks take their defaults; of its schedule
-    record only the settings its kind has: the paper's kinds log the flat schema's other fields too; an outside
-    learner's settings under the key it was configured by)."""
-    from omegaconf import OmegaConf
-    from omegaconf.errors import OmegaConfBaseException
-
-    if config.get("schedule"):
-        schedule = schedule_from_record(config["schedule"])
-        config = {**config, "schedule": {"kind": config["schedule"]["kind"],
-                                         **{item.name: getattr(schedule, item.name) for item in schedule.params()}}}
-    if config.get("learner"):
-        config = {**config, "learner": learner_node(config["learner"])}
-    try:
-        return to_train_config(OmegaConf.merge(OmegaConf.structured(TrainConfig), config))
-    except OmegaConfBaseException as err:
-        raise ConfigError(str(err).splitlines()[0]) from None
-
-
-def load_run(directory: Path, epoch: int | None) -> tuple[TrainConfig, dict[str, Any]]:
-    """A run directory's config (from its log) and checkpoint; RenderInputError (one line) when there is no
-    run, no checkpoint, or ``epoch`` is not the checkpoint's."""
-    folder = RunFolder(directory)
-    log_path, checkpoint_path = folder.log, folder.checkpoint
-    if not log_path.is_file():
-        raise RenderInputError(f"{directory}: not a run directory (no {LOG_NAME})")
-    if not checkpoint_path.is_file():
-        raise RenderInputError(f"{directory}: no {CHECKPOINT_NAME} to render from (a run removes it when it "
-                               f"completes unless keep_checkpoint=true)")
-    try:
-        cfg = config_from_log(read_run(log_path).meta["config"])
-    except (RunLogError, ConfigError, KeyError) as err:
-        raise RenderInputError(f"{log_path}: cannot read the run's config ({err})") from None
-    try:
-        checkpoint = load_checkpoint(checkpoint_path, torch.device("cpu"))
-    except Exception as err:  # torch raises RuntimeError, EOFError or UnpicklingError on a damaged file
-        raise RenderInputError(f"{checkpoint_path} is unreadable ({type(err).__name__})") from None
-    if epoch is not None and epoch != checkpoint["epoch"]:
-        raise RenderInputError(f"{directory}: only the checkpoint's epoch, {checkpoint['epoch']}, can be rendered "
-                               f"(asked for epoch {epoch})")
-    return cfg, checkpoint
-
-
-def policy_from_checkpoint(cfg: TrainConfig, checkpoint: dict[str, Any]) -> GoalConditionedLearner:
-    """The run's learner on the CPU with the checkpoint's networks and normalisers."""
-    env = make_env(cfg.task)
-    spec = env_spec(env)
-    env.close()
-    acting = copy.copy(cfg)
-    acting.precision = "fp32"  # acting is float32 at either precision: a bf16 run renders on any CPU
-    agent = make_agent(acting, spec, *discounting(cfg, spec), torch.device("cpu"))
-    agent.load_state_dict(checkpoint["agent"])
-    return agent
-
-
-class _OneLineParser(argparse.ArgumentParser):
-    """Argument errors as one line on stderr, exit status 2."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``hersd-render RUN_DIR [--epoch K] [--episodes N] [--out GIF]``: exit 0, 2 (bad input) or 1 (no render)."""
-    parser = _OneLineParser(prog="hersd-render", description="Animate a run's policy from its checkpoint: "
-                            "deterministic test episodes into RUN_DIR/policy/epoch_<K>.gif.")
-    parser.add_argument("run_dir", type=Path, help="a run directory (holding run.mcap and checkpoint.pt)")
-    parser.add_argument("--epoch", type=int, help="the checkpoint's epoch (the only one that can be rendered)")
-    parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, help="test episodes to show (default 2)")
-    parser.add_argument("--out", type=Path, help="the GIF to write (default RUN_DIR/policy/epoch_<K>.gif)")
-    args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be at least 1, got {args.episodes}")
-    if args.out is not None and args.out.is_dir():
-        parser.error(f"--out {args.out} is a folder; give the GIF's file name")
-    try:
-        cfg, checkpoint = load_run(args.run_dir, args.epoch)
-        agent = policy_from_checkpoint(cfg, checkpoint)
-        set_intra_op_threads(cfg.flush_denormal)
-    except (RenderInputError, ConfigError) as err:
-        print(f"hersd-render: error: {err}", file=sys.stderr)
-        return 2
-    epoch = checkpoint["epoch"]
-    try:
-        animation = render_policy(agent, cfg, epoch, args.out or RunFolder(args.run_dir).animation(epoch), args.episodes)
-    except RenderError as err:
-        print(f"hersd-render: error: {err}", file=sys.stderr)
-        return 1
-    except OSError as err:  # the GIF's folder or file cannot be written
-        print(f"hersd-render: error: cannot write {err.filename}: {err.strerror}", file=sys.stderr)
-        return 2
-    outcomes = ", ".join("success" if success else "failure" for success in animation.successes)
-    print(f"{animation.path} (epoch {epoch}, {animation.frames} frames, {animation.path.stat().st_size // 1024} KB, "
-          f"{animation.seconds:.1f} s; episodes: {outcomes})")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

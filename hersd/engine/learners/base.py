@@ -30,10 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import dataclasses
-import importlib
 from functools import reduce
-from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, ClassVar, NamedTuple, Optional
 
 import numpy as np
