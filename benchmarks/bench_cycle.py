@@ -1,28 +1,28 @@
-"""Seconds per training cycle on FetchPush at the paper's settings, side by side in one process.
+"""Seconds per training cycle on FetchPush at the paper's settings: every path in interleaved rounds.
 
-A cycle is 2 episodes x 50 env steps plus 40 updates on minibatches of 256 and one target
-move. Measured here, one after another, and printed with their ratios:
+A cycle is 2 episodes x 50 env steps plus 40 updates on minibatches of 256 and one target move. Each round
+measures every path below once, in this order (``rounds.py``: A B C, A B C, ...), after one warm-up round;
+the script prints the CPU (model name, family, model), each path's median (min-max) over the rounds, and each
+ratio's median of per-round ratios:
 
-(a) idealised floor: raw ``mujoco.mj_step`` calls of one cycle (2 x 50 x 20 substeps) plus
-    the update's matrix-product FLOPs at this machine's 256x256x256 fp32 matmul rate (not
-    reachable with these layer shapes: inputs of 28-32 columns, outputs of 1 and 4);
-(b) practical floor: the same raw physics plus 40 updates of a minimal plain-PyTorch DDPG
-    (``nn.Sequential`` nets of the same sizes, two Adams, the textbook critic-then-actor
-    step) on batches already in memory, written here;
-(c) hersd's own ``collect`` + ``update`` steps (hersd/engine/train.py) at 1 thread and at
-    ``threads=auto`` (every core of this machine), with an empty buffer and with the buffer
-    holding what 30 paper epochs store (3,000 episodes = 150,000 transitions);
-(c') hersd at 1 thread with ``precision=bf16`` (the updates' hidden layers in bfloat16), its
-    ratio to fp32 per cycle and per update (update = sampling a minibatch + one learner update),
-    on a CPU with bf16 instructions (skipped elsewhere: hersd refuses bf16 there); and with
-    ``update=fast`` (fp32, the networks' passes written by hand: hersd/engine/learners/fast.py), its ratios
-    to both floors and to the default (autograd) update per cycle and per update; the bf16, fast and
-    1-thread default runs alternate their cycles in one process;
-(d) stable-baselines3 2.9.2 DDPG + HerReplayBuffer configured the same (1 thread), with an
-    empty buffer and with 150,000 stored transitions (its sampler's cost grows with the
-    buffer); skipped if not installed (``pip install stable-baselines3==2.9.2``).
+(a) idealised floor: raw ``mujoco.mj_step`` calls of one cycle (2 x 50 x 20 substeps, best of 3) plus the
+    update's matrix-product FLOPs at this machine's 256x256x256 matmul rate, fp32 and (on a CPU with bf16
+    instructions) bf16 (not reachable with these layer shapes: inputs of 28-32 columns, outputs of 1 and 4);
+(b) practical floor: the same raw physics plus 40 updates of a minimal plain-PyTorch DDPG (``nn.Sequential``
+    nets of the same sizes, two Adams, the textbook critic-then-actor step) on batches already in memory;
+(c) hersd's own ``collect`` + ``update`` steps (hersd/engine/train.py) at 1 thread: the default (fp32
+    autograd), ``update=fast`` (fp32, the networks' passes by hand: hersd/engine/learners/fast.py),
+    ``precision=bf16`` (bf16 autocast over the autograd update) and ``precision=bf16 update=fast`` (the hand
+    passes on bf16 weight copies), the bf16 ones on a CPU with bf16 instructions only (hersd refuses them
+    elsewhere); per cycle and per update (sampling its minibatch + one learner update); the fp32 paths again
+    with the buffer holding what 30 paper epochs store (3,000 episodes = 150,000 transitions), and the
+    default at ``threads=auto`` (every core) at both fills;
+(d) stable-baselines3 2.9.2 DDPG + HerReplayBuffer configured the same (1 thread), with an empty buffer and
+    with 150,000 stored transitions; skipped if not installed (``pip install stable-baselines3==2.9.2``).
 
-Usage: python benchmarks/bench_cycle.py [--cycles 20]. Run it on an idle machine.
+Usage: python benchmarks/bench_cycle.py [--rounds 15] [--cycles 4] (about 7 minutes on a quiet 2-core AMD
+EPYC; each round runs --cycles cycles of each path). Run it on an idle machine; on a loaded one the
+medians are the load's, though the interleaving keeps the ratios fair.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import copy
 import time
+from typing import Callable, Optional
 
 import mujoco
 import numpy as np
@@ -38,23 +39,27 @@ from torch import nn
 
 from hersd.contract.compose import compose_train
 from hersd.contract.config import DDPGConfig
+from hersd.contract.cores import available_cores
 from hersd.contract.tasks import TASKS
 from hersd.engine.resources import cpu_has_bf16
-from hersd.contract.cores import available_cores
 from hersd.engine.run_state import RunState
 from hersd.engine.train import EpochStats, collect, update
 
+from rounds import cpu_line, faster_line, interleaved, ratio, ratio_spread, spread
+
 EPISODES_PER_CYCLE, HORIZON, BATCHES = 2, 50, 40
-# hersd's 1-thread paths: name -> its overrides ("fp32": the default, autograd update)
-PATHS = {"fp32": ["precision=fp32"], "fast": ["update=fast"], "bf16": ["precision=bf16"]}
+# hersd's paths: name -> its overrides (the default: fp32, the autograd update)
+PATHS = {"fp32": [], "fast": ["update=fast"], "bf16": ["precision=bf16"],
+         "bf16 fast": ["precision=bf16", "update=fast"]}
+LABELS = {"fp32": "fp32 autograd", "fast": "fp32 fast", "bf16": "bf16, autocast", "bf16 fast": "bf16, fast"}
 STEPS_PER_CYCLE = EPISODES_PER_CYCLE * HORIZON
 FILL_EPISODES = 30 * 50 * EPISODES_PER_CYCLE  # what 30 paper epochs store
+Measure = Callable[[], dict[str, float]]  # one round of one path: measure name -> seconds
 
 
 # --------------------------------------------------------------------------- (a) and (b): floors
-def physics_seconds_per_cycle(state: RunState, repeats: int = 5) -> float:
-    """Best of ``repeats`` timings of one cycle's raw mj_step calls."""
-    env = state.train_envs[0]
+def physics_seconds_per_cycle(env, repeats: int = 3) -> float:
+    """Best of ``repeats`` timings of one cycle's raw mj_step calls on ``env``."""
     best = float("inf")
     for _ in range(repeats):
         tic = time.perf_counter()
@@ -80,8 +85,9 @@ def update_flops(cfg: DDPGConfig, obs_dim: int, goal_dim: int, action_dim: int) 
     return targets + critic_step + actor_step
 
 
-def matmul_flops_per_second(size: int = 256, repeats: int = 2000) -> float:
-    a, b = torch.randn(size, size), torch.randn(size, size)
+def matmul_flops_per_second(dtype: torch.dtype, size: int = 256, repeats: int = 500) -> float:
+    """FLOP/s of a size x size x size product in ``dtype`` at the current thread count (after 50 warm-ups)."""
+    a, b = torch.randn(size, size).to(dtype), torch.randn(size, size).to(dtype)
     for _ in range(50):
         a @ b
     tic = time.perf_counter()
@@ -90,8 +96,23 @@ def matmul_flops_per_second(size: int = 256, repeats: int = 2000) -> float:
     return 2 * size ** 3 * repeats / (time.perf_counter() - tic)
 
 
-def plain_update_seconds(in_dim: int, action_dim: int, cycles: int) -> float:
-    """Seconds for one cycle's 40 updates + one polyak move of a minimal plain-PyTorch DDPG."""
+def floor_measure(env, flops: float, bf16: bool) -> Measure:
+    """One round of (a): the physics, the matmul rates and the idealised floors (fp32; bf16 on such a CPU)."""
+    def measure() -> dict[str, float]:
+        torch.set_num_threads(1)
+        physics = physics_seconds_per_cycle(env)
+        measures = {"physics": physics, "fp32 rate": matmul_flops_per_second(torch.float32)}
+        measures["ideal"] = physics + BATCHES * flops / measures["fp32 rate"]
+        if bf16:
+            measures["bf16 rate"] = matmul_flops_per_second(torch.bfloat16)
+            measures["ideal bf16"] = physics + BATCHES * flops / measures["bf16 rate"]
+        return measures
+    return measure
+
+
+def plain_update_measure(in_dim: int, action_dim: int, cycles: int) -> Measure:
+    """One round of (b)'s updates: seconds per cycle of 40 updates + one polyak move of a minimal plain-PyTorch
+    DDPG (its own networks, kept from round to round)."""
     def net(inputs: int, outputs: int) -> nn.Sequential:
         return nn.Sequential(nn.Linear(inputs, 256), nn.ReLU(), nn.Linear(256, 256), nn.ReLU(),
                              nn.Linear(256, 256), nn.ReLU(), nn.Linear(256, outputs))
@@ -121,47 +142,49 @@ def plain_update_seconds(in_dim: int, action_dim: int, cycles: int) -> float:
                 for p, tp in zip(net_.parameters(), target_.parameters()):
                     tp.mul_(0.95).add_(p, alpha=0.05)
 
-    one_cycle()  # warm-up
-    tic = time.perf_counter()
-    for _ in range(cycles):
-        one_cycle()
-    return (time.perf_counter() - tic) / cycles
+    def measure() -> dict[str, float]:
+        torch.set_num_threads(1)
+        tic = time.perf_counter()
+        for _ in range(cycles):
+            one_cycle()
+        return {"update": (time.perf_counter() - tic) / cycles}
+    return measure
 
 
 # --------------------------------------------------------------------------- (c) hersd
-def hersd_seconds(threads: int, fill_episodes: int, cycles: int,
-                  precisions: tuple[str, ...] = ("fp32",)) -> dict[str, tuple[float, float]]:
-    """hersd's collect + update at ``threads`` intra-op threads, one run per path of :data:`PATHS` named in
-    ``precisions``, the buffer holding at least ``fill_episodes`` episodes (copies of real ones: sampling cost
-    depends on the count only); the runs' cycles alternate, so a load that comes and goes weighs on each alike.
-    Path -> (seconds per cycle, seconds per update, its minibatch's sampling included)."""
+def hersd_state(overrides: list[str], threads: int, fill_episodes: int) -> RunState:
+    """A FetchPush run's state at ``threads`` intra-op threads, warmed up by 2 cycles, its buffer holding at
+    least ``fill_episodes`` episodes (copies of real ones: sampling cost depends on the count only)."""
     torch.set_num_threads(threads)
-    states = {precision: RunState(compose_train(["task=push", "quiet=true", f"threads={threads}",
-                                                 *PATHS[precision]])) for precision in precisions}
-    for state in states.values():
+    state = RunState(compose_train(["task=push", "quiet=true", f"threads={threads}", *overrides]))
+    stats = EpochStats(1, 0.8)
+    for _ in range(2):
+        collect(state, 0.8, stats)
+        update(state, 0.8, stats)
+    episodes = state.buffer.stored()
+    while state.buffer.size < fill_episodes:
+        state.buffer.store(episodes)
+    return state
+
+
+def hersd_measure(state: RunState, threads: int, cycles: int) -> Measure:
+    """One round of a hersd path: ``cycles`` cycles; seconds per cycle and per update (its sampling included)."""
+    def measure() -> dict[str, float]:
+        torch.set_num_threads(threads)
         stats = EpochStats(1, 0.8)
-        for _ in range(2):  # warm-up, and episodes to copy
-            collect(state, 0.8, stats)
-            update(state, 0.8, stats)
-        episodes = state.buffer.stored()
-        while state.buffer.size < fill_episodes:
-            state.buffer.store(episodes)
-    stats = {precision: EpochStats(1, 0.8) for precision in precisions}
-    for _ in range(cycles):
-        for precision, state in states.items():
-            with stats[precision].timed("cycle"):
-                collect(state, 0.8, stats[precision])
-                with stats[precision].timed("update"):
-                    update(state, 0.8, stats[precision])
-    for state in states.values():
-        state.close()
-    return {precision: (stats[precision].seconds["cycle"] / cycles,
-                        stats[precision].seconds["update"] / (cycles * BATCHES)) for precision in precisions}
+        for _ in range(cycles):
+            with stats.timed("cycle"):
+                collect(state, 0.8, stats)
+                with stats.timed("update"):
+                    update(state, 0.8, stats)
+        return {"cycle": stats.seconds["cycle"] / cycles, "update": stats.seconds["update"] / (cycles * BATCHES)}
+    return measure
 
 
 # --------------------------------------------------------------------------- (d) stable-baselines3
-def sb3_seconds_per_cycle(fill_transitions: int, cycles: int) -> float | None:
-    """SB3 DDPG + HerReplayBuffer per cycle after storing ``fill_transitions`` (random) transitions."""
+def sb3_measure(fill_transitions: int, cycles: int) -> Optional[Measure]:
+    """One round of SB3 DDPG + HerReplayBuffer: seconds per cycle, after storing ``fill_transitions`` (random)
+    transitions; None if stable-baselines3 is not installed."""
     try:
         from stable_baselines3 import DDPG, HerReplayBuffer
         from stable_baselines3.common.env_util import make_vec_env
@@ -181,9 +204,13 @@ def sb3_seconds_per_cycle(fill_transitions: int, cycles: int) -> float | None:
         policy_kwargs={"net_arch": [256, 256, 256]}, seed=0, device="cpu", verbose=0)
     model.learn(total_timesteps=2 * STEPS_PER_CYCLE)  # warm-up: past learning_starts
     _fill_sb3_buffer(model.replay_buffer, env, fill_transitions)
-    tic = time.perf_counter()
-    model.learn(total_timesteps=cycles * STEPS_PER_CYCLE, reset_num_timesteps=False)
-    return (time.perf_counter() - tic) / cycles
+
+    def measure() -> dict[str, float]:
+        torch.set_num_threads(1)
+        tic = time.perf_counter()
+        model.learn(total_timesteps=cycles * STEPS_PER_CYCLE, reset_num_timesteps=False)
+        return {"cycle": (time.perf_counter() - tic) / cycles}
+    return measure
 
 
 def _fill_sb3_buffer(buffer, env, transitions: int) -> None:
@@ -203,60 +230,102 @@ def _fill_sb3_buffer(buffer, env, transitions: int) -> None:
             obs = next_obs
 
 
+# --------------------------------------------------------------------------- the rounds and their report
+def measures(cycles: int, bf16: bool, cores: int) -> tuple[dict[str, Measure], list[RunState]]:
+    """Every path's round, in the order the rounds run them, and the run states to close after."""
+    probe = RunState(compose_train(["task=push", "quiet=true"]))
+    spec, env = probe.spec, probe.train_envs[0]
+    flops = update_flops(DDPGConfig(), spec.obs_dim, spec.goal_dim, spec.action_dim)
+    paths: dict[str, Measure] = {"floor": floor_measure(env, flops, bf16),
+                                 "plain": plain_update_measure(spec.obs_dim + spec.goal_dim, spec.action_dim, cycles)}
+    states = [probe]
+    runs = [(name, overrides, 1, 0) for name, overrides in PATHS.items() if bf16 or not name.startswith("bf16")]
+    runs += [(f"{name} full", PATHS[name], 1, FILL_EPISODES) for name in ("fp32", "fast")]
+    if cores > 1:
+        runs += [("auto", [], cores, 0), ("auto full", [], cores, FILL_EPISODES)]
+    for name, overrides, threads, fill in runs:
+        states.append(hersd_state(overrides, threads, fill))
+        paths[name] = hersd_measure(states[-1], threads, cycles)
+    for name, fill in (("sb3", 0), ("sb3 full", FILL_EPISODES)):
+        sb3 = sb3_measure(fill * HORIZON, cycles)
+        if sb3 is not None:
+            paths[name] = sb3
+    return paths, states
+
+
+def report(kept: dict[str, dict[str, list[float]]], cores: int) -> list[str]:
+    """The printed lines of the rounds' results (after the CPU line)."""
+    floor = kept["floor"]
+    practical = [a + b for a, b in zip(floor["physics"], kept["plain"]["update"])]
+    lines = [f"matmul rate 256x256x256, 1 thread: fp32 {spread(floor['fp32 rate'], 1e-9, 1)} GFLOP/s"
+             + (f", bf16 {spread(floor['bf16 rate'], 1e-9, 1)} GFLOP/s" if "bf16 rate" in floor else ""),
+             f"raw mj_step of one cycle          {spread(floor['physics'])} s",
+             f"(a) idealised floor, fp32         {spread(floor['ideal'])} s/cycle"]
+    if "ideal bf16" in floor:
+        lines.append(f"(a) idealised floor, bf16         {spread(floor['ideal bf16'])} s/cycle")
+    lines.append(f"(b) practical floor               {spread(practical)} s/cycle")
+    for name, label in LABELS.items():
+        if name in kept:
+            cycle, per_update = kept[name]["cycle"], kept[name]["update"]
+            ideal = floor["ideal bf16"] if name.startswith("bf16") else floor["ideal"]
+            lines.append(f"(c) hersd, 1 thread, {label:<15}{spread(cycle)} s/cycle, {spread(per_update, 1e3, 2)} "
+                         f"ms/update; {ratio_spread(ratio(cycle, ideal))} the idealised floor"
+                         f"{' (bf16)' if name.startswith('bf16') else ''}, {ratio_spread(ratio(cycle, practical))} "
+                         "the practical floor")
+    for name in ("fp32 full", "fast full"):
+        label = LABELS[name.split()[0]]
+        lines.append(f"(c) hersd, 1 thread, {label}, 30-epoch buffer {spread(kept[name]['cycle'])} s/cycle")
+    if cores > 1:
+        lines.append(f"(c) hersd, threads=auto ({cores}), fp32 autograd {spread(kept['auto']['cycle'])} s/cycle; "
+                     f"30-epoch buffer {spread(kept['auto full']['cycle'])} s/cycle")
+    for name, fill in (("sb3", "empty"), ("sb3 full", "30-epoch")):
+        if name in kept:
+            lines.append(f"(d) SB3 2.9.2, {fill} buffer {spread(kept[name]['cycle'])} s/cycle")
+    return lines + ratio_lines(kept, cores)
+
+
+def ratio_lines(kept: dict[str, dict[str, list[float]]], cores: int) -> list[str]:
+    """The ratios, each the median of per-round ratios: each path against the fp32 default, fast bf16 against
+    autocast, threads=auto against 1 thread, stable-baselines3 against hersd's default and fast fp32 paths."""
+    fp32 = kept["fp32"]
+    lines = []
+    for name in ("fast", "bf16", "bf16 fast"):
+        for per in ("cycle", "update"):
+            if name in kept:
+                lines.append(faster_line(f"ratio: hersd, 1 thread, {LABELS[name]}", kept[name][per], fp32[per],
+                                         "fp32", per))
+    if "bf16 fast" in kept:
+        lines.append(faster_line("ratio: hersd, 1 thread, bf16, fast", kept["bf16 fast"]["cycle"],
+                                 kept["bf16"]["cycle"], "bf16 autocast", "cycle"))
+    if cores > 1:
+        lines.append(faster_line(f"ratio: hersd, threads=auto ({cores}), fp32 autograd", kept["auto"]["cycle"],
+                                 fp32["cycle"], "1 thread", "cycle"))
+    for sb3, fill, label in (("sb3", "", "empty"), ("sb3 full", " full", "30-epoch")):
+        for name in ("fp32", "fast"):
+            if sb3 in kept:
+                lines.append(faster_line(f"ratio: stable-baselines3, {label} buffer", kept[sb3]["cycle"],
+                                         kept[f"{name}{fill}"]["cycle"], f"hersd {LABELS[name]}", "cycle"))
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cycles", type=int, default=20)
+    parser.add_argument("--rounds", type=int, default=15, help="interleaved rounds (after one warm-up round)")
+    parser.add_argument("--cycles", type=int, default=4, help="cycles of each path per round")
     args = parser.parse_args()
-    cores = available_cores()
-    torch.set_num_threads(1)
-    state = RunState(compose_train(["task=push", "quiet=true"]))
-    spec = state.spec
-    in_dim = spec.obs_dim + spec.goal_dim
-    flops = update_flops(DDPGConfig(), spec.obs_dim, spec.goal_dim, spec.action_dim)
-    rate = matmul_flops_per_second()
-    physics = physics_seconds_per_cycle(state)
-    state.close()
-    ideal = physics + BATCHES * flops / rate
-    practical = physics + plain_update_seconds(in_dim, spec.action_dim, args.cycles)
-    one_thread = hersd_seconds(1, 0, args.cycles, ("fp32", "fast", "bf16") if cpu_has_bf16() else ("fp32", "fast"))
-    full = hersd_seconds(1, FILL_EPISODES, args.cycles, ("fp32", "fast"))  # the fill SB3's sampler is slowest at
-    hersd = {(cores, fill): hersd_seconds(cores, fill, args.cycles)["fp32"][0] for fill in (0, FILL_EPISODES)}
-    hersd.update({(1, 0): one_thread["fp32"][0], (1, FILL_EPISODES): full["fp32"][0]})
-    fast = {0: one_thread["fast"][0], FILL_EPISODES: full["fast"][0]}  # the fastest fp32 path, per fill
-    sb3 = {fill: sb3_seconds_per_cycle(fill * HORIZON, args.cycles) for fill in (0, FILL_EPISODES)}
-
-    print(f"matmul rate               {rate / 1e9:7.1f} GFLOP/s (fp32, 256x256x256, 1 thread)")
-    print(f"(a) idealised floor       {ideal:7.3f} s/cycle (mj_step {physics:.3f} s + matmuls at that rate "
-          f"{BATCHES * flops / rate:.3f} s)")
-    print(f"(b) practical floor       {practical:7.3f} s/cycle (mj_step {physics:.3f} s + plain PyTorch updates "
-          f"{practical - physics:.3f} s)")
-    one = hersd[(1, 0)]
-    print(f"(c) hersd, 1 thread       {one:7.3f} s/cycle -> {one / practical:.2f}x the practical floor, "
-          f"{one / ideal:.2f}x the idealised one")
-    print(f"    hersd, 1 thread, 30-epoch buffer {hersd[(1, FILL_EPISODES)]:7.3f} s/cycle")
-    (fast_cycle, fast_update), fp32_update = one_thread["fast"], one_thread["fp32"][1]
-    print(f"    hersd, 1 thread, update=fast {fast_cycle:7.3f} s/cycle -> {fast_cycle / practical:.2f}x the practical "
-          f"floor, {fast_cycle / ideal:.2f}x the idealised one; {one / fast_cycle:.2f}x faster than autograd per "
-          f"cycle; per update {fast_update * 1e3:.2f} ms against {fp32_update * 1e3:.2f} ms, "
-          f"{fp32_update / fast_update:.2f}x faster than autograd")
-    if "bf16" not in one_thread:
-        print("    hersd, 1 thread, bf16     skipped: this CPU has no bf16 instructions")
-    else:
-        (bf16_cycle, bf16_update), fp32_update = one_thread["bf16"], one_thread["fp32"][1]
-        print(f"    hersd, 1 thread, bf16     {bf16_cycle:7.3f} s/cycle -> {one / bf16_cycle:.2f}x faster than fp32 "
-              f"per cycle; per update {bf16_update * 1e3:.2f} ms against {fp32_update * 1e3:.2f} ms, "
-              f"{fp32_update / bf16_update:.2f}x faster than fp32")
-    if cores > 1:
-        auto = hersd[(cores, 0)]
-        print(f"    hersd, threads=auto ({cores}) {auto:7.3f} s/cycle -> {one / auto:.2f}x faster than 1 thread; "
-              f"30-epoch buffer {hersd[(cores, FILL_EPISODES)]:.3f} s/cycle")
-    for fill, seconds in sb3.items():
-        label = "empty buffer" if fill == 0 else "30-epoch buffer"
-        if seconds is None:
-            print("(d) stable-baselines3      not installed (pip install stable-baselines3==2.9.2)")
-            break
-        print(f"(d) SB3 2.9.2, {label:<15} {seconds:7.3f} s/cycle -> hersd (1 thread, same fill) is "
-              f"{seconds / hersd[(1, fill)]:.2f}x faster, with update=fast {seconds / fast[fill]:.2f}x")
+    if args.rounds < 1 or args.cycles < 1:
+        parser.error("--rounds and --cycles must be at least 1")
+    cores, bf16 = available_cores(), cpu_has_bf16()
+    print(cpu_line())
+    paths, states = measures(args.cycles, bf16, cores)
+    kept = interleaved(paths, args.rounds)
+    for state in states:
+        state.close()
+    print(f"{args.rounds} interleaved rounds of {args.cycles} cycles per path, 1 torch thread unless a line says "
+          "otherwise; median (min-max) over the rounds; a ratio: the median of per-round ratios")
+    if not bf16:
+        print("bf16 paths skipped: this CPU has no bf16 instructions")
+    print("\n".join(report(kept, cores)))
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ import torch
 
 from hersd.engine.denormals import set_intra_op_threads
 from hersd.contract.tasks import TASKS
-from hersd.engine.render import load_run
+from hersd.engine.render_cli import load_run
 from hersd.engine.run_state import RunState
 from hersd.engine.train import EpochStats, collect, run_epoch, update
 

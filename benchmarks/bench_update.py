@@ -2,17 +2,17 @@
 
 CPU seconds (process time: what a loaded machine's time slicing leaves out) of one update at FetchPush's
 sizes and the paper's settings (3 x 256 networks, batches of 256, one fused Adam), 1 thread, on random
-batches, the two updates alternating in rounds of 40 updates (one cycle's) after a warm-up round; the
-learner's update alone, without the minibatch's sampling (``bench_cycle.py`` times both, and the cycle).
+batches, the two updates interleaved in rounds of 40 updates (one cycle's) after a warm-up round (``rounds.py``);
+the learner's update alone, without the minibatch's sampling (``bench_cycle.py`` times both, and the cycle).
+Prints the CPU's name, family and model, each update's median (min-max) and the median of per-round ratios.
 
-Usage: python benchmarks/bench_update.py [--rounds 8] (under a minute; docs/LEARNERS.md, "The fast update").
+Usage: python benchmarks/bench_update.py [--rounds 20] (about a minute; docs/LEARNERS.md, "The fast update").
 """
 
 from __future__ import annotations
 
 import argparse
 
-import numpy as np
 import torch
 
 from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig
@@ -20,6 +20,7 @@ from hersd.engine.learners import learner_class
 from hersd.engine.learners.fast import fast_learner_class
 
 from bench_precision import PUSH_SPEC, UPDATES, seconds_per_update  # FetchPush's sizes, one cycle's updates
+from rounds import cpu_line, faster_line, spread
 
 
 def update_cpu_seconds(name: str, rounds: int) -> dict[str, list[float]]:
@@ -35,15 +36,17 @@ def update_cpu_seconds(name: str, rounds: int) -> dict[str, list[float]]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=8)
+    parser.add_argument("--rounds", type=int, default=20)
     args = parser.parse_args()
+    if args.rounds < 1:
+        parser.error("--rounds must be at least 1")
+    print(cpu_line())
     for name in ("ddpg", "td3"):
         seconds = update_cpu_seconds(name, args.rounds)
-        autograd, fast = (np.array(seconds[update]) for update in ("autograd", "fast"))
-        print(f"{name.upper()} update CPU time (median of {args.rounds} rounds of {UPDATES}): autograd "
-              f"{np.median(autograd) * 1e3:.2f} ms, fast {np.median(fast) * 1e3:.2f} ms -> fast "
-              f"{np.median(autograd / fast):.2f}x faster (round by round: {np.min(autograd / fast):.2f}-"
-              f"{np.max(autograd / fast):.2f}x)")
+        print(f"{name.upper()} update CPU time, {args.rounds} interleaved rounds of {UPDATES}, median (min-max): "
+              f"autograd {spread(seconds['autograd'], 1e3, 2)} ms, fast {spread(seconds['fast'], 1e3, 2)} ms")
+        print(faster_line(f"ratio: {name.upper()} update, fp32 fast", seconds["fast"], seconds["autograd"],
+                          "autograd", "update"))
 
 
 if __name__ == "__main__":

@@ -17,6 +17,11 @@ float32 passes and without an autograd graph (docs/LEARNERS.md, "The fast update
   the other), its kernel called directly (``torch._fused_adam_``, as ``Adam.step`` calls it: the same numbers,
   without the step's bookkeeping).
 
+With ``precision=bf16`` the same passes run their hidden layers' products in bfloat16 (:class:`HandMLPBF16`: bf16
+copies of the float32 master weights, refreshed after each optimiser step, target move and checkpoint load; the
+output layers, losses, target and Adam in float32; docs/LEARNERS.md, "Precision"): gradients within 0.15 of each
+gradient's largest element of the float32 autograd update's, as close as bf16 autocast's.
+
 Its sums run in another order than autograd's (products of other shapes, the bias added by ``addmm``, the
 target's r + gamma Q' in one pass), so its numbers differ from the default update's in the last bits and a
 run's grow apart from there: ``update=fast`` is a run of its own (its folder differs), and the default
@@ -44,21 +49,27 @@ _threshold_backward = torch.ops.aten.threshold_backward.grad_input  # g * (h > 0
 
 class Activations:
     """Buffers of one network's passes, shared by a network and its target (the target's passes end before the
-    network's begin): each hidden layer's output, the output, and one scratch gradient, for up to ``rows`` rows."""
+    network's begin): each hidden layer's output and one scratch gradient (in ``hidden_dtype``), the output
+    (float32), for up to ``rows`` rows; with bf16 hidden layers also ``widened``, the last hidden layer's output
+    in float32 (the float32 output layer's input, then its gradient)."""
 
-    def __init__(self) -> None:
+    def __init__(self, hidden_dtype: torch.dtype = torch.float32) -> None:
+        self.hidden_dtype = hidden_dtype
         self.rows = 0
         self.hidden: list[torch.Tensor] = []
         self.output: Optional[torch.Tensor] = None
         self.scratch: Optional[torch.Tensor] = None
+        self.widened: Optional[torch.Tensor] = None
 
     def take(self, weights: list[torch.Tensor], rows: int) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
         """Views of ``rows`` rows of the buffers (made anew when more rows are asked for than they hold)."""
         if rows > self.rows:
-            like = weights[0]
-            self.hidden = [like.new_empty(rows, weight.shape[0]) for weight in weights[:-1]]
+            like, dtype = weights[0], self.hidden_dtype
+            self.hidden = [like.new_empty(rows, weight.shape[0], dtype=dtype) for weight in weights[:-1]]
             self.output = like.new_empty(rows, weights[-1].shape[0])
-            self.scratch = like.new_empty(rows, max(weight.shape[0] for weight in weights[:-1]))
+            self.scratch = like.new_empty(rows, max(weight.shape[0] for weight in weights[:-1]), dtype=dtype)
+            if dtype != torch.float32:
+                self.widened = like.new_empty(rows, weights[-1].shape[1])
             self.rows = rows
         return [h[:rows] for h in self.hidden], self.output[:rows], self.scratch[:rows]
 
@@ -116,16 +127,82 @@ class HandMLP:
             self.weights[0].grad.copy_(torch.mm(below.t(), g).t())
         torch.sum(g, 0, out=self.biases[i].grad)
 
+    def refresh(self) -> None:
+        """Make the weights the passes use those of the parameters (after they moved): they are the same here."""
+
+
+class HandMLPBF16(HandMLP):
+    """:class:`HandMLP` with the hidden layers in bfloat16 (``update=fast precision=bf16``): their products on
+    bf16 copies of the float32 master weights and biases (:meth:`refresh`: once per optimiser step), on bf16
+    inputs and activations, float32 accumulation inside each product (oneDNN's, as under autocast), their weight
+    gradients rounded to bf16 and written into the float32 ``.grad``, bias gradients summed in float32. The
+    output layer (critics' 256 -> 1, actors' 256 -> A) runs in float32 on the last hidden layer widened to
+    float32, as ``FullPrecisionLinear`` does under autocast."""
+
+    def __init__(self, net: nn.Sequential, grads: bool, buffers: Optional[Activations] = None):
+        super().__init__(net, grads, buffers if buffers is not None else Activations(torch.bfloat16))
+        self.low_weights = [weight.detach().to(torch.bfloat16) for weight in self.weights[:-1]]
+        self.low_biases = [bias.detach().to(torch.bfloat16) for bias in self.biases[:-1]]
+        self.low_grads = [torch.empty_like(weight) for weight in self.low_weights[1:]] if grads else []
+
+    def refresh(self) -> None:
+        """The bf16 copies rounded anew from the float32 master weights and biases."""
+        torch._foreach_copy_([*self.low_weights, *self.low_biases], [*self.weights[:-1], *self.biases[:-1]])
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        """(rows, in) float32 -> (rows, out) float32, the inputs rounded to bf16 once; keeps the bf16 inputs and
+        ReLU outputs and the last one widened for :meth:`backward`; the output is a buffer the next forward
+        overwrites."""
+        hidden, output, _ = self.buffers.take(self.weights, inputs.shape[0])
+        h = self.inputs = inputs.to(torch.bfloat16)
+        for weight, bias, out in zip(self.low_weights, self.low_biases, hidden):
+            h = torch.addmm(bias, h, weight.t(), out=out).relu_()
+        self.hidden = hidden
+        widened = self.buffers.widened[:inputs.shape[0]].copy_(h)
+        return torch.addmm(self.biases[-1], widened, self.weights[-1].t(), out=output)
+
+    def backward(self, grad_output: torch.Tensor, weight_rows: int,
+                 input_rows: Optional[slice] = None, input_cols: Optional[slice] = None) -> Optional[torch.Tensor]:
+        """:meth:`HandMLP.backward` from dL/d output (rows, out) float32: the output layer's in float32, the
+        gradient at its input rounded to bf16, the hidden layers' in bf16; dL/d inputs returned in float32."""
+        rows, last = grad_output.shape[0], len(self.weights) - 1
+        scratch, widened = self.buffers.take(self.weights, rows)[2], self.buffers.widened[:rows]
+        if weight_rows:
+            torch.mm(grad_output[:weight_rows].t(), widened[:weight_rows], out=self.weights[last].grad)
+            torch.sum(grad_output[:weight_rows], 0, out=self.biases[last].grad)
+        below = self.hidden[-1]
+        dh = scratch[:, :below.shape[1]].copy_(torch.mm(grad_output, self.weights[last], out=widened))
+        g = _threshold_backward(dh, below, 0, grad_input=below)
+        for i in reversed(range(last)):
+            below = self.hidden[i - 1] if i else self.inputs
+            if weight_rows:
+                self._low_parameter_grads(i, g[:weight_rows], below[:weight_rows])
+            if i:
+                dh = torch.mm(g, self.low_weights[i], out=scratch[:, :below.shape[1]])
+                g = _threshold_backward(dh, below, 0, grad_input=below)
+        if input_rows is None:
+            return None
+        return torch.mm(self.low_weights[0][:, input_cols].t(), g[input_rows].t()).t().float()
+
+    def _low_parameter_grads(self, i: int, g: torch.Tensor, below: torch.Tensor) -> None:
+        """Hidden layer i's weight gradient (a bf16 product) and bias gradient (a float32 sum) into their float32
+        ``.grad``, from the bf16 gradient at its output g (rows, out) and its bf16 input ``below`` (rows, in)."""
+        if i:
+            self.weights[i].grad.copy_(torch.mm(g.t(), below, out=self.low_grads[i - 1]))
+        else:  # the first layer's few input columns: the product as (in, out), then transposed
+            self.weights[0].grad.copy_(torch.mm(below.t(), g).t())
+        torch.sum(g, 0, dtype=torch.float32, out=self.biases[i].grad)
+
 
 class FastUpdate:
     """The hand-written update of a DDPG-like learner (DDPG, TD3), mixed in before the learner's class."""
 
     def _hand_networks(self) -> None:
         """Hand passes over every network (gradients for the online ones), and no input buffers yet."""
-        online = ("actor", *self.CRITICS)
-        self.hand = {name: HandMLP(getattr(self, name), grads=True) for name in online}
-        self.hand.update({f"{name}_target": HandMLP(getattr(self, f"{name}_target"), grads=False,
-                                                    buffers=self.hand[name].buffers) for name in online})
+        online, hand = ("actor", *self.CRITICS), HandMLPBF16 if self.precision == "bf16" else HandMLP
+        self.hand = {name: hand(getattr(self, name), grads=True) for name in online}
+        self.hand.update({f"{name}_target": hand(getattr(self, f"{name}_target"), grads=False,
+                                                 buffers=self.hand[name].buffers) for name in online})
         self._input_buffers: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
         # Adam's kernel is called directly only for the settings the learners give it (else Adam.step)
         self._direct_adam = all(group["fused"] and not (group["amsgrad"] or group["maximize"] or group["capturable"]
@@ -182,7 +259,23 @@ class FastUpdate:
         if actor_due:
             self.last_actor_loss = self._actor_backward(critic_rows[rows:, in_dim:], *policy_q)
         self._step(actor_due)
+        self._refresh(("actor", *self.CRITICS) if actor_due else self.CRITICS)
         return UpdateStats.of(critic_loss, self.last_actor_loss, q, batch)
+
+    def _refresh(self, names: tuple[str, ...]) -> None:
+        """The weights the hand passes of networks ``names`` use made those of their parameters (bf16: rounded)."""
+        for name in names:
+            self.hand[name].refresh()
+
+    def update_targets(self) -> None:
+        """The learner's polyak move of the targets, then their hand passes' weights refreshed."""
+        super().update_targets()
+        self._refresh(tuple(f"{name}_target" for name in self.TARGETS))
+
+    def load_state_dict(self, state: dict) -> None:
+        """The learner's checkpoint loaded into the parameters, then every hand pass's weights refreshed."""
+        super().load_state_dict(state)
+        self._refresh(tuple(self.hand))
 
     def _critics_backward(self, critic_rows: torch.Tensor, target: torch.Tensor, actor_due: bool
                           ) -> tuple[float, torch.Tensor, tuple[float, Optional[torch.Tensor]]]:
