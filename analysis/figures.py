@@ -9,6 +9,7 @@ study's) is one more function appended there.
 
 from __future__ import annotations
 
+import functools
 import textwrap
 from dataclasses import dataclass
 from functools import partial
@@ -20,6 +21,7 @@ matplotlib.use("Agg")
 
 import pandas as pd  # noqa: E402
 from matplotlib import colormaps  # noqa: E402
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
@@ -27,7 +29,8 @@ from analysis import metrics  # noqa: E402
 from analysis.critic import critic_curves  # noqa: E402
 from analysis.load import HER_EPS, HER_WEIGHTS, PAPER_EPOCHS, is_archer  # noqa: E402
 from analysis.metrics import Analysis  # noqa: E402
-from hersd.contract.schedules import MU_EPS_BAND, schedule_class, schedule_rank  # noqa: E402
+from hersd.contract.errors import ConfigError  # noqa: E402
+from hersd.contract.schedules import MU_EPS_BAND, Schedule, schedule_class, schedule_rank  # noqa: E402
 from hersd.contract.tasks import task_rank, task_title  # noqa: E402
 
 SHARE_STYLE = {  # column -> (legend, colour), stacked bottom to top
@@ -42,12 +45,14 @@ MAX_COLUMNS = 2  # at 100 dpi a figure of two panels and its legend is ~1250-135
 ALTERNATE_DASHES = [":", (0, (6, 2, 1, 2, 1, 2)), (0, (10, 3))]  # for configs whose usual style is taken
 LEGEND_WIDTH = 2.3  # inches reserved right of the panels for a figure legend, at least
 LEGEND_CHARACTERS = 34  # legend entries are wrapped to lines of at most this many characters
+HANDLE_LENGTH = 3.0  # em: a legend's line samples long enough to show one period of every dash pattern
 GLYPH_WIDTH = 0.6  # average width of a DejaVu Sans glyph, in em: how many characters fit a width
 TITLE_SIZE, PANEL_TITLE_SIZE, LEGEND_SIZE = 12, 10, 8  # points
 SMALLEST_FONT = LEGEND_SIZE  # points: no text of a figure is smaller (tests/test_figures.py, test_report_browser.py)
 EPOCH_TICKS = 4  # intervals between epoch ticks, at most
 IN_PROGRESS = " (in progress)"  # appended to a config's legend label for its unfinished runs
-IN_PROGRESS_STYLE = {"linestyle": (0, (3, 2)), "linewidth": 0.8, "alpha": 0.8}  # thin dashes, each run on its own
+FAILED = " (failed)"  # appended instead for its runs that stopped with an error
+IN_PROGRESS_STYLE = {"linewidth": 0.8, "alpha": 0.7}  # thin, in the config's colour and dashes, each run on its own
 
 
 @dataclass
@@ -88,9 +93,22 @@ def _config_table(analysis: Analysis) -> pd.DataFrame:
             .sort_index())
 
 
+@functools.cache
+def _class_of(kind: str) -> type[Schedule] | None:
+    """The schedule class of ``kind``, None when it cannot be imported here (its runs are read from their logs)."""
+    try:
+        return schedule_class(kind)
+    except ConfigError:
+        return None
+
+
 def kind_title(kind: str) -> str:
-    """A panel's title for schedules of ``kind``: the class's title, else the kind."""
-    return schedule_class(kind).title or kind
+    """A panel's title for schedules of ``kind``: the class's title, else the kind (a class not importable here:
+    its class name)."""
+    cls = _class_of(kind)
+    if cls is None:
+        return kind.rpartition(".")[2]
+    return cls.title or kind
 
 
 def decay_kinds(table: pd.DataFrame) -> list[str]:
@@ -128,22 +146,46 @@ def config_styles(analysis: Analysis) -> dict[str, dict]:
     """Line style of every config, the same in every figure: the schedule's colour (ARCHER
     grey instead of black), dashed with MEP, else the kind's own (Schedule.line: dash-dot for
     exponential decays, so kinds stay apart where they share a panel). Configs that would still look alike (same
-    schedule, differing in another setting such as epochs) get dotted, then other dash patterns."""
+    schedule, differing in another setting such as epochs or learner) get dotted, then other dash patterns, then,
+    those taken too, the next PALETTE colour: no two configs share colour and line style (:func:`_free_style`)."""
     configs = _config_table(analysis)
     colours = schedule_colours(configs)
     styles = {}
-    used: dict[tuple, int] = {}
+    used: set[tuple] = set()
     for config, row in configs.iterrows():
         colour = colours[row["schedule_tag"]]
         if row["constant_rate"] and is_archer(row["algo"]):
             colour = "0.55"
-        linestyle = "--" if row["mep"] else schedule_class(row["schedule"]).line
-        repeats = used.get((colour, linestyle), 0)
-        used[(colour, linestyle)] = repeats + 1
-        if repeats:
-            linestyle = ALTERNATE_DASHES[(repeats - 1) % len(ALTERNATE_DASHES)]
+        linestyle = "--" if row["mep"] else getattr(_class_of(row["schedule"]), "line", "-")
+        colour, linestyle = _free_style(colour, linestyle, used)
+        used.add((colour, linestyle))
         styles[config] = {"color": colour, "linestyle": linestyle, "linewidth": 1.5}
     return styles
+
+
+def _free_style(colour, linestyle, used: set[tuple]) -> tuple:
+    """The first (colour, line style) no config has taken (``used``): ``colour`` with ``linestyle``, then with each
+    of ALTERNATE_DASHES, then each PALETTE colour with them."""
+    dashes = [linestyle, *(dash for dash in ALTERNATE_DASHES if dash != linestyle)]
+    candidates = [(colour, dash) for dash in dashes] + [(other, dash) for other in PALETTE for dash in dashes]
+    return next((candidate for candidate in candidates if candidate not in used), candidates[-1])
+
+
+def _epochs_of(analysis: Analysis) -> dict[str, int]:
+    """K of each configuration (a label names one K)."""
+    runs = analysis.runs.drop_duplicates("config")
+    return dict(zip(runs["config"].astype(str), runs["total_epochs"].astype(int)))
+
+
+def _task_epoch_panels(tasks_configs: pd.DataFrame, epochs_of: dict[str, int]) -> list[tuple[str, int]]:
+    """One panel per task and K of ``tasks_configs`` (columns task, config): tasks in order, the paper's K first."""
+    pairs = {(task, epochs_of[str(config)]) for task, config in zip(tasks_configs["task"], tasks_configs["config"])}
+    return sorted(pairs, key=lambda pair: (task_rank(pair[0]), pair[1] != PAPER_EPOCHS, pair[1]))
+
+
+def _panel_title(task: str, total: int, several: bool) -> str:
+    """A panel's title: the task's, with its K when the figure's panels differ in K."""
+    return task_title(task) + (f", K = {total}" if several else "")
 
 
 # --- layout ------------------------------------------------------------------------------------------------------
@@ -213,7 +255,8 @@ def _legend_width(labels, fontsize: float = LEGEND_SIZE) -> float:
 
 def _figure_legend(figure: Figure, axes, legend_width: float, order: list[str] | None = None, **options) -> None:
     """One legend for the figure in the space _panels kept on the right; one entry per label (in the order of
-    ``order``'s labels, wrapped as the legend wraps them, when given)."""
+    ``order``'s labels, wrapped as the legend wraps them, when given). A legend taller or wider than that space
+    grows the figure (:func:`_keep_inside`): no legend runs off the canvas."""
     entries = {}
     for axis in axes:
         for handle, label in zip(*axis.get_legend_handles_labels()):
@@ -222,40 +265,76 @@ def _figure_legend(figure: Figure, axes, legend_width: float, order: list[str] |
         entries = {_legend_label(label): entries[_legend_label(label)] for label in order}
     width, _ = figure.get_size_inches()
     top = axes[0].get_position().y1
-    options = {"fontsize": LEGEND_SIZE, **options}
-    figure.legend(list(entries.values()), list(entries), loc="upper left", frameon=False,
-                  bbox_to_anchor=(1 - (legend_width + 0.05) / width, top), **options)
+    options = {"fontsize": LEGEND_SIZE, "handlelength": HANDLE_LENGTH, **options}
+    legend = figure.legend(list(entries.values()), list(entries), loc="upper left", frameon=False,
+                           bbox_to_anchor=(1 - (legend_width + 0.05) / width, top), **options)
+    _keep_inside(figure, legend)
+
+
+EDGE = 0.1  # inches kept free between a legend and the figure's edge
+
+
+def _keep_inside(figure: Figure, legend) -> None:
+    """Grow ``figure`` down and to the right by what ``legend`` (measured as drawn) overruns of it, keeping every
+    panel, the title and the legend where they are in inches."""
+    box = legend.get_window_extent(FigureCanvasAgg(figure).get_renderer())
+    width, height = figure.get_size_inches()
+    below = max(0.0, EDGE - box.y0 / figure.dpi)
+    beyond = max(0.0, box.x1 / figure.dpi + EDGE - width)
+    if not below and not beyond:
+        return
+    new_width, new_height = width + beyond, height + below
+
+    def moved(x: float, y: float) -> tuple[float, float]:  # a point in figure fractions, kept in place in inches
+        return x * width / new_width, (y * height + below) / new_height
+
+    figure.set_size_inches(new_width, new_height)
+    for axis in figure.axes:
+        position = axis.get_position()
+        x0, y0 = moved(position.x0, position.y0)
+        axis.set_position([x0, y0, position.width * width / new_width, position.height * height / new_height])
+    if figure._suptitle is not None:
+        figure._suptitle.set_y(moved(0.0, figure._suptitle.get_position()[1])[1])
+    anchor = legend.get_bbox_to_anchor().transformed(figure.transFigure.inverted())
+    legend.set_bbox_to_anchor(moved(anchor.x0, anchor.y1), transform=figure.transFigure)
 
 
 def _draw_curve(axis, medians: pd.DataFrame, in_progress: pd.DataFrame, config: str, style: dict) -> None:
     """Median line and min-max band of one config's complete runs (``medians``: one task's median
-    curves), then each of its runs in progress on its own, thin and dashed (``in_progress``: their
-    smoothed curves; one of a single epoch, which a line cannot show, as a dot)."""
+    curves), then each of its runs in progress (or failed) on its own, thin, in the config's colour and dashes
+    (``in_progress``: their smoothed curves, column failed; one of a single epoch, which a line cannot show, as a
+    dot)."""
     curve = medians[medians["config"] == config]
     if not curve.empty:
         axis.fill_between(curve["epoch"], curve["low"], curve["high"], color=style["color"], alpha=0.12, linewidth=0)
         axis.plot(curve["epoch"], curve["median"], label=_legend_label(config), **style)
     unfinished = in_progress[in_progress["config"] == config]
     for _, run in unfinished.groupby("run") if not unfinished.empty else ():  # a groupby costs ms, even empty
-        axis.plot(run["epoch"], run["smoothed"], color=style["color"], label=_legend_label(config + IN_PROGRESS),
-                  **IN_PROGRESS_STYLE, marker="o" if len(run) == 1 else "None", markersize=3)
+        suffix = FAILED if run["failed"].iloc[0] else IN_PROGRESS
+        axis.plot(run["epoch"], run["smoothed"], label=_legend_label(config + suffix),
+                  **{**style, **IN_PROGRESS_STYLE}, marker="o" if len(run) == 1 else "None", markersize=3)
 
 
 def _in_progress(analysis: Analysis) -> pd.DataFrame:
-    """The smoothed curves of the runs in progress."""
-    return analysis.curves[~analysis.curves["complete"]]
+    """The smoothed curves of the runs not complete, column failed: the run stopped with an error."""
+    unfinished = analysis.curves[~analysis.curves["complete"]]
+    failed = analysis.runs.loc[analysis.runs["error"] != "", "run"]
+    return unfinished.assign(failed=unfinished["run"].isin(failed))
 
 
 def _legend_labels(configs: list[str], in_progress: pd.DataFrame) -> list[str]:
-    """The legend labels of these configs: each, and ``<config> (in progress)`` for those with runs in progress."""
-    unfinished = set(in_progress["config"])
-    return [*configs, *(config + IN_PROGRESS for config in configs if config in unfinished)]
+    """The legend labels of these configs: each, and ``<config> (in progress)`` / ``(failed)`` for those with runs
+    in progress or failed."""
+    running, failed = (set(in_progress.loc[in_progress["failed"] == stopped, "config"]) for stopped in (False, True))
+    return [*configs, *(config + IN_PROGRESS for config in configs if config in running),
+            *(config + FAILED for config in configs if config in failed)]
 
 
 def _in_progress_note(in_progress: pd.DataFrame) -> str:
     """The caption's sentence about runs in progress (none: empty)."""
-    return (" Thin dashed lines: runs still in progress, each seed's own moving average (a dot: its first epoch "
-            "alone); they enter neither the median, the band nor any table." if not in_progress.empty else "")
+    return (" Thin lines: runs still in progress (or failed: stopped with an error), each seed's own moving average "
+            "in its configuration's colour and dashes (a dot: its first epoch alone); they enter neither the median, "
+            "the band nor any table." if not in_progress.empty else "")
 
 
 def _success_ylabel(window: int) -> str:
@@ -271,8 +350,9 @@ def schedules_figure(analysis: Analysis) -> list[ReportFigure]:
     if curves.empty:
         return []
     caption = ("The probability ε(k) that a sampled transition's goal is replaced by a hindsight goal, one step per "
-               "epoch k (drawn over k − 1 to k), for each schedule of the loaded runs, one colour per line: each "
-               "kind's own formula (eq. 9 for the paper's decays), the configurations that share a schedule and K "
+               "epoch k (drawn over k − 1 to k), for each schedule of the loaded runs, one colour per line, as their "
+               "logs recorded it (eq. 9 for the paper's decays; past the last epoch a run in progress has logged, the "
+               "schedule's class where it gives the logged rates), the configurations that share a schedule and K "
                "named together; a schedule that adapts to the run (the success-driven one) by the rates its runs "
                "realised, per task (the logs' relabel rate, median over seeds). "
                f"Constant schedules (HER and ARCHER use ε = {HER_EPS:g}) are dashed and drawn in every panel.")
@@ -353,7 +433,8 @@ def composition_figures(analysis: Analysis) -> list[ReportFigure]:
                   and task_shares["epoch"].max() >= metrics.PAPER_COMPOSITION_EPOCH else None)
         caption = (f"{task_title(task)}: share of each kind of transition in the sampled minibatches, per epoch: real "
                    "transitions whose reward says success (blue) or failure (red), and transitions whose goal was "
-                   "relabelled in hindsight (purple). Median over the complete seeds of each share, rescaled to sum to 1."
+                   "relabelled in hindsight (purple). Median over the complete seeds of each share, rescaled to sum "
+                   "to 1; epoch k's shares drawn over k − 1 to k, each panel over its configuration's K epochs."
                    + (f" The black line marks epoch {marked}, where the paper gives HER's composition (table "
                       "below)." if marked else ""))
         found.append(ReportFigure(f"composition_{task}", f"{task_title(task)}: minibatch composition (Fig. 2)",
@@ -363,19 +444,23 @@ def composition_figures(analysis: Analysis) -> list[ReportFigure]:
 
 def _draw_composition(task: str, shares: pd.DataFrame, shown: list[str], marked: int | None) -> Figure:
     titles = [_fitting(config, PANEL_SIZE[0], PANEL_TITLE_SIZE) for config in shown]
+    spans = {config: (shares.loc[shares["config"] == config, "epoch"].min(),
+                      shares.loc[shares["config"] == config, "epoch"].max()) for config in shown}
     figure, axes = _panels(len(shown), f"{task_title(task)}: minibatch composition (median over seeds)",
-                           legend_width=LEGEND_WIDTH, title_lines=max(map(_lines, titles)))
+                           legend_width=LEGEND_WIDTH, title_lines=max(map(_lines, titles)),
+                           sharex=len(set(spans.values())) == 1)
     for axis, config, title in zip(axes, shown, titles):
         panel = shares[shares["config"] == config]
-        axis.stackplot(panel["epoch"], *(panel[column] for column in metrics.SHARE_COLUMNS),
+        # epoch k's shares drawn over (k - 1, k], as Fig. 1 draws its rate: a step schedule's step stays a step
+        steps = pd.concat([panel.iloc[:1].assign(epoch=panel["epoch"].iloc[0] - 1), panel])
+        axis.stackplot(steps["epoch"], *(steps[column] for column in metrics.SHARE_COLUMNS), step="pre",
                        labels=[SHARE_STYLE[c][0] for c in metrics.SHARE_COLUMNS],
                        colors=[SHARE_STYLE[c][1] for c in metrics.SHARE_COLUMNS], alpha=0.8, linewidth=0)
         if marked is not None and panel["epoch"].max() >= marked:
             axis.axvline(marked, color="black", linewidth=1.0)
         _set_title(axis, title)
         axis.set_ylim(0, 1)
-        if panel["epoch"].max() > panel["epoch"].min():
-            axis.set_xlim(panel["epoch"].min(), panel["epoch"].max())
+        axis.set_xlim(spans[config][0] - 1, spans[config][1])
     axes[0].set_yticks([0, 0.5, 1])  # shared by every panel: three ticks instead of six to draw in each
     _label_outer(axes, "share of the minibatch")
     _figure_legend(figure, axes[:1], LEGEND_WIDTH, reverse=True, fontsize=9)
@@ -409,11 +494,32 @@ def _learning_panels(present: pd.DataFrame) -> list[tuple[tuple | None, list[tup
     return figures
 
 
+def _split_by_epochs(panels: list[tuple[str, list[str]]], epochs_of: dict[str, int], constants: set[str]
+                     ) -> list[tuple[str, list[str]]]:
+    """Learning-curve panels with one K each (one x axis per K): each panel split by its configs' K, ``, K = <K>``
+    added to its title when they differ (the paper's K first); a K with only constant rates (``constants``) gets
+    one panel of them."""
+    totals = sorted({epochs_of[config] for _, shown in panels for config in shown},
+                    key=lambda total: (total != PAPER_EPOCHS, total))
+    if len(totals) <= 1:
+        return panels
+    split = []
+    for total in totals:
+        at_k = [(title, [config for config in shown if epochs_of[config] == total]) for title, shown in panels]
+        with_decay = [(f"{title}, K = {total}", shown) for title, shown in at_k if set(shown) - constants]
+        if with_decay:
+            split += with_decay
+        else:
+            split.append((f"constant rates, K = {total}", list(dict.fromkeys(c for _, shown in at_k for c in shown))))
+    return split
+
+
 def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
     """Figs. 4-9: per task and reward weights, the decay schedules against the constant
     baseline with the same weights (HER or ARCHER), one panel per decay kind."""
     configs = _config_table(analysis)
     styles = config_styles(analysis)
+    epochs_of = _epochs_of(analysis)
     found = []
     unfinished = _in_progress(analysis)
     for task in ordered_tasks(analysis.curves["task"]):
@@ -422,25 +528,31 @@ def learning_curve_figures(analysis: Analysis) -> list[ReportFigure]:
         run_configs = set(analysis.curves.loc[analysis.curves["task"] == task, "config"])
         present = configs.loc[[c for c in configs.index if c in run_configs]]
         for weights, panels in _learning_panels(present):
+            panels = _split_by_epochs(panels, epochs_of, set(present.index[present["constant_rate"].astype(bool)]))
             if weights is None:
                 name, title = f"curves_{task}", f"{task_title(task)}: learning curves"
             else:
                 baselines = [c for c in panels[0][1] if configs.loc[c, "constant_rate"]]
-                versus = " and ".join(baselines) if baselines else "each other (no constant baseline)"
+                versus = (" and ".join(baselines) if len(baselines) <= 2 else  # learner variants: one line of title
+                          f"{baselines[0]} and {len(baselines) - 1} other constant rates") if baselines \
+                    else "each other (no constant baseline)"
                 name = f"curves_{task}_lr{weights[0]:g}_lh{weights[1]:g}"
                 title = f"{task_title(task)}: decay schedules vs {versus} ({_weights_text(*weights)})"
             caption = (f"{title}. Each seed's test success is smoothed by a trailing {analysis.window}-epoch moving "
                        "average (the first epochs average the epochs so far); lines are the median over the "
                        "complete seeds, shaded bands their range (min to max)." + _in_progress_note(in_progress))
-            draw = partial(_draw_learning_curves, title, medians, in_progress, panels, styles, analysis.window)
+            one_k = len({epochs_of[config] for _, shown in panels for config in shown}) == 1
+            draw = partial(_draw_learning_curves, title, medians, in_progress, panels, styles, analysis.window, one_k)
             found.append(ReportFigure(name, f"{title} (Figs. 4-9)", caption, draw))
     return found
 
 
 def _draw_learning_curves(title: str, medians: pd.DataFrame, in_progress: pd.DataFrame,
-                          panels: list[tuple[str, list[str]]], styles: dict[str, dict], window: int) -> Figure:
+                          panels: list[tuple[str, list[str]]], styles: dict[str, dict], window: int,
+                          sharex: bool = True) -> Figure:
+    """One learning-curve figure; ``sharex``: its panels share one K (else each has its own x axis)."""
     legend_width = _legend_width(_legend_labels([config for _, shown in panels for config in shown], in_progress))
-    figure, axes = _panels(len(panels), title, legend_width=legend_width)
+    figure, axes = _panels(len(panels), title, legend_width=legend_width, sharex=sharex)
     for axis, (panel_title, shown) in zip(axes, panels):
         for config in shown:
             _draw_curve(axis, medians, in_progress, config, styles[config])
@@ -465,19 +577,22 @@ def q_figures(analysis: Analysis) -> list[ReportFigure]:
                "schedules with the same reward weights (λr = λh = 1); linear decays solid, exponential "
                "dash-dot. An early overestimate that falls sooner means the critic is corrected sooner.")
     return [ReportFigure("q_mean", "Mean Q-value during training (Fig. 10)", caption,
-                         partial(_draw_q, q_values, config_styles(analysis)))]
+                         partial(_draw_q, q_values, config_styles(analysis), _epochs_of(analysis)))]
 
 
-def _draw_q(q_values: pd.DataFrame, styles: dict[str, dict]) -> Figure:
-    tasks = ordered_tasks(q_values["task"])
+def _draw_q(q_values: pd.DataFrame, styles: dict[str, dict], epochs_of: dict[str, int]) -> Figure:
+    """Fig. 10: a panel per task and K (one x axis each; ``epochs_of``: each config's K)."""
+    panels = _task_epoch_panels(q_values, epochs_of)
+    several = len({total for _, total in panels}) > 1
     legend_width = _legend_width(q_values["config"].unique())
-    figure, axes = _panels(len(tasks), "Mean critic Q(s, a) over training batches (mean over seeds)",
-                           legend_width=legend_width, sharey=False)
-    for axis, task in zip(axes, tasks):
+    figure, axes = _panels(len(panels), "Mean critic Q(s, a) over training batches (mean over seeds)",
+                           legend_width=legend_width, sharey=False, sharex=not several)
+    for axis, (task, total) in zip(axes, panels):
         for config, curve in q_values[q_values["task"] == task].groupby("config", observed=True):
-            axis.plot(curve["epoch"], curve["q_mean"], label=_legend_label(config),
-                      **{**styles[config], "linewidth": 1.1})
-        _set_title(axis, task_title(task))
+            if epochs_of[str(config)] == total:
+                axis.plot(curve["epoch"], curve["q_mean"], label=_legend_label(config),
+                          **{**styles[config], "linewidth": 1.1})
+        _set_title(axis, _panel_title(task, total, several))
     _label_outer(axes, "mean Q(s, a)")
     _figure_legend(figure, axes, legend_width)
     return figure
@@ -502,7 +617,7 @@ def critic_figures(analysis: Analysis) -> list[ReportFigure]:
                "each epoch's training rows that kept their real goal and over the relabelled rows. Median over "
                "complete seeds, band: interquartile range. Positive bias is overestimation.")
     return [ReportFigure("critic_bias", "The critic against the true return (Fig. 10, measured)", caption,
-                         partial(_draw_critic, curves, config_styles(analysis)))]
+                         partial(_draw_critic, curves, config_styles(analysis), _epochs_of(analysis)))]
 
 
 # A row of panels per pair; a task's row is left out when neither of its columns has a value (older logs).
@@ -514,16 +629,23 @@ CRITIC_ROWS = ((("bias_real_mean", "bias, real goals (Q − return)"),
                 ("q_hindsight_mean", "mean Q, relabelled training rows")))
 
 
-def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict]) -> Figure:
-    tasks = ordered_tasks(curves["task"])
+def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict], epochs_of: dict[str, int]) -> Figure:
+    """Fig. 10 measured: CRITIC_ROWS' rows of panels per task and K (one x axis each; ``epochs_of``: each
+    config's K)."""
+    curves = curves.assign(total_epochs=curves["config"].astype(str).map(epochs_of))
+    pairs = _task_epoch_panels(curves, epochs_of)
+    several = len({total for _, total in pairs}) > 1
     legend_width = _legend_width(curves["config"].unique())
-    panels = [(task, column, title) for task in tasks for row in CRITIC_ROWS
-              if curves.loc[curves["task"] == task, [f"{column}_median" for column, _ in row]].notna().any(axis=None)
+    panels = [(task, total, column, title) for task, total in pairs for row in CRITIC_ROWS
+              if curves.loc[(curves["task"] == task) & (curves["total_epochs"] == total),
+                            [f"{column}_median" for column, _ in row]].notna().any(axis=None)
               for column, title in row]
     figure, axes = _panels(len(panels), "The critic's bias and its Q by row type "
-                           "(median over seeds, interquartile band)", legend_width=legend_width, sharey=False)
-    for axis, (task, column, title) in zip(axes, panels):
-        for config, curve in curves[curves["task"] == task].groupby("config", observed=True):
+                           "(median over seeds, interquartile band)", legend_width=legend_width, sharey=False,
+                           sharex=not several)
+    for axis, (task, total, column, title) in zip(axes, panels):
+        shown = curves[(curves["task"] == task) & (curves["total_epochs"] == total)]
+        for config, curve in shown.groupby("config", observed=True):
             curve = curve.dropna(subset=[f"{column}_median"])
             style = styles[config]
             axis.plot(curve["epoch"], curve[f"{column}_median"], label=_legend_label(config),
@@ -534,7 +656,7 @@ def _draw_critic(curves: pd.DataFrame, styles: dict[str, dict]) -> Figure:
             axis.set_ylim(-0.02, 1.02)
         elif column.startswith("bias"):
             axis.axhline(0.0, color="0.5", linewidth=0.6)
-        _set_title(axis, f"{task_title(task)}: {title}")
+        _set_title(axis, f"{_panel_title(task, total, several)}: {title}")
     _label_outer(axes, "Q")
     _figure_legend(figure, axes, legend_width)
     return figure
@@ -558,23 +680,26 @@ def mep_figures(analysis: Analysis) -> list[ReportFigure]:
     caption = ("Configurations with MEP (dashed) beside the same configuration without it: median over seeds of "
                f"the {analysis.window}-epoch moving average of test success, range over seeds shaded."
                + _in_progress_note(in_progress))
-    tasks = ordered_tasks(curves.loc[curves["config"].isin(mep_configs.index), "task"])
+    epochs_of = _epochs_of(analysis)
+    panels = _task_epoch_panels(curves[curves["config"].isin(mep_configs.index)], epochs_of)
     return [ReportFigure("mep", "MEP comparison (Fig. 11)", caption,
-                         partial(_draw_mep, tasks, curves, medians, in_progress, shown, config_styles(analysis),
-                                 analysis.window))]
+                         partial(_draw_mep, panels, curves, medians, in_progress, shown, config_styles(analysis),
+                                 analysis.window, epochs_of))]
 
 
-def _draw_mep(tasks: list[str], curves: pd.DataFrame, medians: pd.DataFrame, in_progress: pd.DataFrame,
-              shown: list[str], styles: dict[str, dict], window: int) -> Figure:
+def _draw_mep(panels: list[tuple[str, int]], curves: pd.DataFrame, medians: pd.DataFrame, in_progress: pd.DataFrame,
+              shown: list[str], styles: dict[str, dict], window: int, epochs_of: dict[str, int]) -> Figure:
+    """Fig. 11: a panel per task and K with a MEP configuration (``panels``), one x axis each."""
+    several = len({total for _, total in panels}) > 1
     legend_width = _legend_width(_legend_labels(shown, in_progress))
-    figure, axes = _panels(len(tasks), "Episode prioritisation (MEP) with and without relabel-rate decay",
-                           legend_width=legend_width)
-    for axis, task in zip(axes, tasks):
+    figure, axes = _panels(len(panels), "Episode prioritisation (MEP) with and without relabel-rate decay",
+                           legend_width=legend_width, sharex=not several)
+    for axis, (task, total) in zip(axes, panels):
         present = set(curves.loc[curves["task"] == task, "config"])
-        for config in [c for c in shown if c in present]:
+        for config in [c for c in shown if c in present and epochs_of[c] == total]:
             _draw_curve(axis, medians[medians["task"] == task], in_progress[in_progress["task"] == task], config,
                         styles[config])
-        _set_title(axis, task_title(task))
+        _set_title(axis, _panel_title(task, total, several))
         axis.set_ylim(-0.02, 1.02)
     _label_outer(axes, _success_ylabel(window))
     _figure_legend(figure, axes, legend_width)
@@ -600,7 +725,8 @@ def mean_rate_figures(analysis: Analysis) -> list[ReportFigure]:
     found = []
     for task in ordered_tasks(seeds["task"]):
         caption = (f"{task_title(task)}: each configuration's outcome against its mean relabel rate "
-                   "μ_ε = (1/K) Σ ε(k): eq. 10 exactly for schedules of the epoch (squares: constant rates, HER at 0.8; circles: "
+                   "μ_ε = (1/K) Σ ε(k) of the logged rates: eq. 10 exactly for schedules of the epoch "
+                   "(squares: constant rates, HER at 0.8; circles: "
                    "decays), the realised mean of the logged rates for adaptive ones (diamonds: each seed at its "
                    "own, the marker at their median, the horizontal bar their range). Left: the mean raw test "
                    "success over the K epochs (higher is better); right: the first epoch the "

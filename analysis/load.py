@@ -15,14 +15,23 @@ where the loaded runs of one label differ in K, K is appended but for the paper'
 ``HER K=4``), so runs of different K are never pooled, across tasks neither. Runs that share a label
 but not their identity less the seed (:func:`hersd.contract.runstore.run_identity`, the run store's
 own rule) are told apart by the settings that differ.
+
+What a run's log recorded is the truth about it: its relabel rates (the ``/epoch`` records' ``relabel_rate``) give
+its ``mu_eps`` and Fig. 1's lines (:func:`analysis.metrics.schedule_curves`); its schedule record gives the kind and
+settings. The schedule's class is imported only for its label, tag and title, and to check it: where today's class
+gives other rates than a log (an edited ``rate``), one warning line per configuration names it
+(:func:`rate_mismatch_lines`). A log whose class cannot be imported here is read all the same, labelled from its
+record as a class without a label of its own would be (:class:`LoggedSchedule`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import re
 from importlib import resources
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any, Iterable, NamedTuple, Sequence
 
@@ -35,8 +44,9 @@ from analysis.workers import ForkedMap
 from hersd.contract.config import PAPER_LEARNER, AlgoConfig, TrainConfig, learner_node
 from hersd.contract.errors import ConfigError
 from hersd.contract.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS, RunLogError, read_records
-from hersd.contract.runstore import HASHED_UNLESS, run_identity
+from hersd.contract.runstore import HASHED_UNLESS, RunFolder, run_identity
 from hersd.contract.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
+from hersd.contract.schedules.base import shown_value
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
@@ -56,7 +66,9 @@ RUN_COLUMNS = (
     "mep",            # config.algo.mep.enabled
     "seed",
     "total_epochs",   # K: config.epochs
-    "mu_eps",         # the exact mean rate over the run's K (eq. 10 for eq. 9's kinds); the mean logged rate if adaptive
+    "mu_eps",         # the mean of the run's K logged rates (eq. 10 for eq. 9's kinds); a fixed schedule's run in
+                      # progress: its logged rates, then its class's for the epochs to come (NaN without a class that
+                      # gives the logged rates); an adaptive one's in progress: the mean of the rates logged so far
     "variant",        # the settings it runs at other than their earlier value (variant), e.g. "precision=bf16"; "" if none
     "defaults_id",    # 8 hex digits of its configuration with those settings at their earlier value (defaults_id):
                       # a variant's runs share it with the runs of the configuration they vary
@@ -66,6 +78,7 @@ RUN_COLUMNS = (
     "run_id",         # 8-hex config hash written by training
     "cpu",            # the CPU the log was started on (metadata machine.cpu_model; empty in logs that predate it)
     "path",           # the log's path relative to the loaded folder
+    "error",          # the first line of the error that stopped the run (its error.log), "" if none: a failed run
 )
 
 
@@ -106,11 +119,19 @@ class RunTable:
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
     missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
     copies: list[str] = field(default_factory=list)  # lines naming the second logs of runs read, left out
-    left_out: int = 0  # logs found and not read: unreadable, of a schedule class not importable here, or copies
+    left_out: int = 0  # logs found and not read: unreadable or copies
+    rate_mismatches: list[str] = field(default_factory=list)  # one line per configuration whose class's rates differ
 
     def warnings(self) -> list[str]:
-        """One line per log left out: unreadable, of a schedule class not importable here, or a copy."""
-        return [*(f"skipped unreadable log {line}" for line in self.skipped), *self.missing_schedules, *self.copies]
+        """One line per log left out (unreadable, a copy), per damaged log read up to its damage, per failed run,
+        per schedule class not importable here (its runs read from their logs) and per configuration whose class
+        gives other rates than its logs."""
+        runs = self.runs if len(self.runs) else pd.DataFrame(columns=["damaged", "error", "path", "epochs_done"])
+        damaged = [f"damaged log {run.path}: read its {run.epochs_done} epochs before the damage"
+                   for run in runs[runs["damaged"].astype(bool)].itertuples()]
+        failed = [f"failed run {run.path}: {run.error}" for run in runs[runs["error"] != ""].itertuples()]
+        return [*(f"skipped unreadable log {line}" for line in self.skipped), *self.copies, *damaged, *failed,
+                *self.missing_schedules, *self.rate_mismatches]
 
 
 class MissingSchedule(NamedTuple):
@@ -119,6 +140,33 @@ class MissingSchedule(NamedTuple):
 
     path: str
     error: str
+
+
+@dataclass
+class LoggedSchedule:
+    """A schedule known only by a log's record, its class not importable here: named as
+    :meth:`Schedule.label` and :meth:`Schedule.tag` name a class without its own (its class name in lower case
+    and every setting); its rates are the logged ones. ``adaptive``: whether its runs' logs disagree
+    (:func:`_tables` decides)."""
+
+    record: dict[str, Any]
+    adaptive: bool = False
+    constant_rate = False
+
+    def settings(self) -> list[tuple[str, Any]]:
+        return [(name, value) for name, value in self.record.items() if name != "kind"]
+
+    def short_name(self) -> str:
+        """The class name in lower case (``newcomer_steps.KStep`` -> ``kstep``), as the schedules' short_name
+        gives it for a class without a kind."""
+        return str(self.record["kind"]).rpartition(".")[2].lower()
+
+    def label(self) -> str:
+        return " ".join([self.short_name(), *(f"{name}={shown_value(value)}" for name, value in self.settings())])
+
+    def tag(self) -> str:
+        words = [self.short_name(), *(f"{name}_{shown_value(value)}" for name, value in self.settings())]
+        return re.sub(r"[^A-Za-z0-9._=-]", "_", "-".join(words))
 
 
 def variant(settings: dict[str, Any]) -> list[str]:
@@ -135,8 +183,9 @@ def defaults_id(settings: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(defaults, sort_keys=True, default=str).encode()).hexdigest()[:8]
 
 
-def config_label(schedule: Schedule, lambda_r: float, lambda_h: float, mep: bool, learner: str = PAPER_LEARNER,
-                 epochs: int = PAPER_EPOCHS, variants: Sequence[str] = (), algo: str = "her") -> str:
+def config_label(schedule: Schedule | LoggedSchedule, lambda_r: float, lambda_h: float, mep: bool,
+                 learner: str = PAPER_LEARNER, epochs: int = PAPER_EPOCHS, variants: Sequence[str] = (),
+                 algo: str = "her") -> str:
     """Name of a configuration, e.g. ``HER``, ``ARCHER``, ``linear b1=0.25``,
     ``exp b1=0.5 b2=0.5``, ``HER-MEP``, ``linear b1=0.5 λh=0.5``, ``TD3 HER`` (learners other
     than the paper's DDPG lead the label: :func:`learner_label`), ``HER precision=bf16``
@@ -225,28 +274,44 @@ def _distinguish(labels: list[str], settings: list[dict[str, Any]], groups: list
 
 class ReadLog(NamedTuple):
     """One readable log: ``row`` its RUN_COLUMNS values (but run and config), ``settings`` the dotted
-    config fields that define its configuration, ``columns`` EPOCH_FIELDS name -> array of shape (epochs,)."""
+    config fields that define its configuration, ``columns`` EPOCH_FIELDS name -> array of shape (epochs,);
+    ``missing`` the error naming its schedule class when that cannot be imported here ("" if it can),
+    ``mismatch`` where today's class gives other rates than the log ("" if it gives the logged ones)."""
 
     row: dict[str, Any]
     settings: dict[str, Any]
     columns: dict[str, np.ndarray]
     sessions: list[dict[str, Any]] = []  # analysis.provenance.session_rows
+    missing: str = ""
+    mismatch: str = ""
 
 
-def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """One run's columns from its metadata, and its configuration-defining settings."""
+RATE_TOLERANCE = 1e-9  # a class's rate this close to the logged one gives it (the log keeps every float exactly)
+
+
+def logged_schedule(record: dict[str, Any]) -> tuple[Schedule | LoggedSchedule, str]:
+    """The schedule of a log's record and "", or, when its class cannot be imported here, a
+    :class:`LoggedSchedule` and the error naming the class."""
+    try:
+        return schedule_from_record(record), ""
+    except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
+        return LoggedSchedule(dict(record)), str(err)
+
+
+def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], Schedule | LoggedSchedule, str]:
+    """One run's columns from its metadata, its configuration-defining settings, its schedule and the error
+    naming the schedule's class when that cannot be imported ("" if it can); mu_eps is left to the rates."""
     config = meta["config"]
-    schedule = schedule_from_record(config["schedule"])
-    record = schedule.record()
-    mean_rate = schedule.exact_mean_rate(int(config["epochs"]))
+    schedule, missing = logged_schedule(config["schedule"])
+    record = schedule.record if missing else schedule.record()
     row = {
         "task": config["task"]["name"],
         "algo": config["algo"]["name"],
         "learner": str(config.get("learner", {}).get("name", PAPER_LEARNER)),
-        "schedule": kind_name(type(schedule)),
+        "schedule": str(record["kind"]) if missing else kind_name(type(schedule)),
         "schedule_tag": schedule.tag(),
         "schedule_label": schedule.label(),
-        "schedule_record": json.dumps(record, sort_keys=True),
+        "schedule_record": json.dumps(record, sort_keys=not missing),  # a logged record in its order: its label's
         "constant_rate": schedule.constant_rate,
         "adaptive": schedule.adaptive,
         **{name: float(record.get(name, np.nan)) for name in ("eps", "beta1", "beta2")},
@@ -255,11 +320,10 @@ def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
         "mep": bool(config["algo"]["mep"]["enabled"]),
         "seed": int(meta.get("seed", config["seed"])),
         "total_epochs": int(config["epochs"]),
-        "mu_eps": np.nan if mean_rate is None else mean_rate,
         "run_id": str(meta["run_id"]),
         "cpu": str((meta.get("machine") or {}).get("cpu_model") or ""),
     }
-    return row, configuration(config)
+    return row, configuration(config), schedule, missing
 
 
 def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:
@@ -270,25 +334,62 @@ def _epoch_columns(records: list[dict[str, Any]]) -> dict[str, np.ndarray]:
             for name, (kind, _) in EPOCH_FIELDS.items()}
 
 
-def read_log(path: Path, folder: Path) -> ReadLog | MissingSchedule | str:
-    """One log -> :class:`ReadLog`, :class:`MissingSchedule` when its schedule class cannot be imported, or the
-    line saying why it was skipped (``"<path>: <reason>"``, the path relative to ``folder``). A damaged log
-    gives the epochs written before the damage."""
+def class_rates(schedule: Schedule, epochs: int, total_epochs: int, train_success: np.ndarray) -> np.ndarray:
+    """The rates today's class gives epochs 1..``epochs`` of a run of K = ``total_epochs`` (shape (epochs,)),
+    an adaptive one from the logged train success (shape (>= epochs - 1,)); raises what the class raises."""
+    return np.array([schedule.rate(k, total_epochs, train_success[:k - 1].tolist()) if schedule.adaptive
+                     else schedule.rate(k, total_epochs) for k in range(1, epochs + 1)], dtype=float)
+
+
+def rate_difference(schedule: Schedule, total_epochs: int, columns: dict[str, np.ndarray]) -> str:
+    """Where today's class gives other rates than the logged ones (``columns``: the log's epoch columns), e.g.
+    ``epoch 1: logged 0.9, class 0.5``; "" where it gives every logged rate (within RATE_TOLERANCE)."""
+    logged = columns["relabel_rate"]
+    try:
+        expected = class_rates(schedule, len(logged), total_epochs, columns["train_success"])
+    except Exception as err:  # noqa: BLE001 - a user's rate: named in the line, the log's rates are used
+        return f"its rate raised {type(err).__name__}"
+    differ = np.flatnonzero(~np.isclose(expected, logged, rtol=0.0, atol=RATE_TOLERANCE))
+    if not len(differ):
+        return ""
+    first = differ[0]
+    return f"epoch {first + 1}: logged {logged[first]:.6g}, class {expected[first]:.6g}"
+
+
+def logged_mean_rate(schedule: Schedule | LoggedSchedule, total_epochs: int, logged: np.ndarray,
+                     trusted: bool) -> float:
+    """mu_eps of a run from its logged rates (shape (epochs done,)). A fixed schedule's: the exact mean of its K rates
+    (summed as fractions, rounded once: K rates of 0.8 give 0.8), for a run in progress its logged rates followed
+    by its class's for the epochs to come when the class gives the logged ones (``trusted``), else NaN. An adaptive
+    one's: the (floating) mean of the rates logged so far; NaN without any."""
+    if schedule.adaptive:
+        return float(np.mean(logged)) if len(logged) else float("nan")
+    if len(logged) < total_epochs and not trusted:
+        return float("nan")
+    rates = logged if len(logged) >= total_epochs else [*logged, *schedule.epoch_rates(total_epochs)[len(logged):]]
+    return float(sum(map(Fraction, map(float, rates))) / len(rates))
+
+
+def read_log(path: Path, folder: Path) -> ReadLog | str:
+    """One log -> :class:`ReadLog`, or the line saying why it was skipped (``"<path>: <reason>"``, the path
+    relative to ``folder``). A damaged log gives the epochs written before the damage; a log whose schedule class
+    cannot be imported here is read all the same (:class:`LoggedSchedule`)."""
     shown = path.relative_to(folder).as_posix()
     try:
         log = read_records(path)
-        row, settings = _run_row(log.meta)
+        row, settings, schedule, missing = _run_row(log.meta)
     except RunLogError as err:
         return f"{shown}: {str(err).removeprefix(f'{path}: ')}"
-    except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
-        return MissingSchedule(shown, str(err))
     except (KeyError, TypeError, ValueError) as err:
         return f"{shown}: run metadata lacks or mistypes a config field ({err})"
-    row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown)
     columns = _epoch_columns(log.records)
-    if row["adaptive"] and log.records:  # placed by the rate it realised
-        row["mu_eps"] = float(np.mean(columns["relabel_rate"]))
-    return ReadLog(row, settings, columns, session_rows(log.sessions, [(m.topic, m.log_time) for m in log.messages]))
+    mismatch = "" if missing else rate_difference(schedule, row["total_epochs"], columns)
+    row.update(epochs_done=len(log.records), complete=log.complete, damaged=log.damaged, path=shown,
+               error=("" if log.complete else RunFolder(path.parent).error()) or "",
+               mu_eps=logged_mean_rate(schedule, row["total_epochs"], columns["relabel_rate"],
+                                       trusted=not missing and not mismatch))
+    return ReadLog(row, settings, columns, session_rows(log.sessions, [(m.topic, m.log_time) for m in log.messages]),
+                   missing, mismatch)
 
 
 def find_logs(folder: Path) -> list[Path]:
@@ -306,7 +407,7 @@ class LogReading:
         self._batches = [paths[i::READ_BATCHES] for i in range(READ_BATCHES)] if parallel else [paths]
         self._reading = ForkedMap(self._read_batch, self._batches)
 
-    def _read_batch(self, paths: list[Path]) -> list[ReadLog | MissingSchedule | str]:
+    def _read_batch(self, paths: list[Path]) -> list[ReadLog | str]:
         return [read_log(path, self.folder) for path in paths]
 
     def result(self, tasks: Iterable[str] | None = None, algos: Iterable[str] | None = None) -> RunTable:
@@ -315,10 +416,8 @@ class LogReading:
                    for path, log in zip(batch, logs)}
         logs = [by_path[path] for path in self.paths]
         readable, copies = one_log_per_run([log for log in logs if isinstance(log, ReadLog)])
-        missing = missing_schedule_lines([log for log in logs if isinstance(log, MissingSchedule)])
         if not readable:
-            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable"
-                                   + "".join(f"; {line}" for line in missing))
+            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable")
         kept = [log for log in readable
                 if (tasks is None or log.row["task"] in tasks) and (algos is None or log.row["algo"] in algos)]
         if not kept:
@@ -327,7 +426,9 @@ class LogReading:
             raise ReportInputError(f"no run matches the filters (tasks present: {', '.join(found_tasks)}; "
                                    f"algos present: {', '.join(found_algos)})")
         table = _tables(kept, skipped=[log for log in logs if isinstance(log, str)])
-        table.missing_schedules, table.copies, table.left_out = missing, copies, len(logs) - len(readable)
+        table.missing_schedules = missing_schedule_lines([MissingSchedule(log.row["path"], log.missing)
+                                                          for log in kept if log.missing])
+        table.copies, table.left_out = copies, len(logs) - len(readable)
         return table
 
 
@@ -362,21 +463,54 @@ def _first_start(log: ReadLog) -> Any:
 
 
 def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:
-    """One line per schedule class that cannot be imported (its error, naming the class), with the logs it
-    keeps out and the fix."""
+    """One line per schedule class that cannot be imported (its error, naming the class), with the logs read
+    without it (from their rates, labelled from their records) and how to give them the class's own label."""
     paths: dict[str, list[str]] = {}
     for log in missing:
         paths.setdefault(log.error, []).append(log.path)
     fixes = {"; is its module on PYTHONPATH?": "put the folder holding the class's module on PYTHONPATH "
-                                               "(PYTHONPATH=<folder> hersd-report ...) to read them",
-             "; fix that module": "fix that module to read them"}  # hersd.contract.plugins.class_at's two endings
+                                               "(PYTHONPATH=<folder> hersd-report ...)",
+             "; fix that module": "fix that module"}  # hersd.contract.plugins.class_at's two endings
     lines = []
     for error, shown in paths.items():
         ending = next((end for end in fixes if error.endswith(end)), None)
         lines.append(f"{error.removesuffix(ending or '')}: {len(shown)} run log{'' if len(shown) == 1 else 's'} "
-                     f"skipped ({shown[0]}{' and others' if len(shown) > 1 else ''})"
-                     + (f"; {fixes[ending]}" if ending else ""))
+                     f"reported from {'its' if len(shown) == 1 else 'their'} logged rates and labelled from the "
+                     f"log ({shown[0]}{' and others' if len(shown) > 1 else ''}); "
+                     f"{fixes[ending] if ending else 'make its class accept the logged settings'} for the class's own "
+                     "label and a check of its rates")
     return lines
+
+
+def rate_mismatch_lines(configs: list[str], logs: list[ReadLog]) -> list[str]:
+    """One line per configuration (``configs[i]``: log i's label) some of whose logs hold other rates than its
+    schedule's class gives today (an edited ``rate``): the report draws and averages the logged ones."""
+    found: dict[str, list[ReadLog]] = {}
+    for config, log in zip(configs, logs):
+        if log.mismatch:
+            found.setdefault(config, []).append(log)
+    return [f"configuration {config}: schedule class {differing[0].row['schedule']} today gives other rates than "
+            f"{len(differing)} of its logs ({differing[0].row['path']}, {differing[0].mismatch}); the report uses "
+            "the logged rates" for config, differing in found.items()]
+
+
+def _settle_logged(rows: list[dict[str, Any]], logs: list[ReadLog]) -> None:
+    """Runs whose schedule class cannot be imported: adaptive when two logs of one schedule and K hold other
+    rates at an epoch both reached (a fixed schedule gives every run the same); then, in progress, their mean
+    logged rate so far as mu_eps."""
+    groups: dict[tuple, list[int]] = {}
+    for index, log in enumerate(logs):
+        if log.missing:
+            groups.setdefault((rows[index]["schedule_record"], rows[index]["total_epochs"]), []).append(index)
+    for members in groups.values():
+        rates = [logs[index].columns["relabel_rate"] for index in members]
+        reached = min(map(len, rates))
+        adaptive = any(not np.allclose(other[:reached], rates[0][:reached], rtol=0.0, atol=RATE_TOLERANCE)
+                       for other in rates[1:])
+        for index, logged in zip(members, rates):
+            rows[index]["adaptive"] = adaptive
+            if adaptive and len(logged):
+                rows[index]["mu_eps"] = float(np.mean(logged))
 
 
 def start_reading(folder: str | Path) -> LogReading:
@@ -407,7 +541,9 @@ def load_runs(folder: str | Path, tasks: Iterable[str] | None = None,
 def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     """The runs and epochs tables of readable logs: labels told apart, configs ordered."""
     rows = [dict(log.row) for log in logs]
-    schedules = [schedule_from_record(json.loads(row["schedule_record"])) for row in rows]
+    _settle_logged(rows, logs)
+    schedules = [LoggedSchedule(json.loads(row["schedule_record"])) if log.missing
+                 else schedule_from_record(json.loads(row["schedule_record"])) for row, log in zip(rows, logs)]
     variants = [variant(log.settings) for log in logs]
 
     def label(index: int, epochs: int = PAPER_EPOCHS) -> str:
@@ -437,4 +573,5 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     epochs = runs.take(run_of_row).reset_index(drop=True)
     for name in EPOCH_FIELDS:
         epochs[name] = np.concatenate([log.columns[name] for log in logs])
-    return RunTable(runs=runs, epochs=epochs, skipped=skipped, sessions=session_table([log.sessions for log in logs]))
+    return RunTable(runs=runs, epochs=epochs, skipped=skipped, sessions=session_table([log.sessions for log in logs]),
+                    rate_mismatches=rate_mismatch_lines(labels, logs))

@@ -4,7 +4,9 @@ Vocabulary (each formula is restated in docs/ANALYSIS.md):
 
 - *smoothed curve* of a run: trailing moving average of test success over ``window``
   epochs; the first epochs average the epochs so far (min_periods=1).
-- *in progress*: a run whose log has no completion marker (still running, or stopped). It
+- *failed*: a run that stopped with an error (its ``error.log``, :meth:`hersd.contract.runstore.RunFolder.error`);
+  it is not in progress, and like one enters no statistic.
+- *in progress*: a run whose log has no completion marker (still running, or stopped), not failed. It
   enters no statistic: not the median curves, tables, IQM, P(improve), composition or mean Q;
   the learning-curve figures draw it on its own (``Analysis.curves``, ``complete`` False).
 - *median curve* of a (task, config): at each epoch, the median over its complete seeds of
@@ -25,7 +27,7 @@ from fractions import Fraction
 import numpy as np
 import pandas as pd
 
-from analysis.load import HER_EPS, HER_WEIGHTS
+from analysis.load import HER_EPS, HER_WEIGHTS, RATE_TOLERANCE
 from hersd.contract.config import PAPER_LEARNER
 from hersd.contract.schedules import schedule_from_record, schedule_rank
 from hersd.contract.tasks import task_rank
@@ -202,10 +204,19 @@ def run_outcomes(curves: pd.DataFrame) -> pd.DataFrame:
     return table.rename_axis("run").reset_index()[["run", *RUN_OUTCOME_COLUMNS, RUN_AUC]]
 
 
+def run_state(complete: bool, error: str, done: int, total: int) -> str:
+    """A run's state: ``complete``, ``failed (epoch N of K): <the first line of its error>`` for a run that stopped
+    with an error (``error``: the run table's), else ``in progress (epoch N of K)``."""
+    if complete:
+        return "complete"
+    return f"failed (epoch {done} of {total}): {error}" if error else f"in progress (epoch {done} of {total})"
+
+
 def run_states(runs: pd.DataFrame) -> pd.Series:
-    """Per run (the run table): ``complete`` or ``in progress (epoch N of K)``."""
-    return pd.Series(["complete" if complete else f"in progress (epoch {done} of {total})" for complete, done, total
-                      in zip(runs["complete"], runs["epochs_done"], runs["total_epochs"])], index=runs.index, dtype=object)
+    """Per run (the run table): :func:`run_state`."""
+    return pd.Series([run_state(*values) for values in
+                      zip(runs["complete"], runs["error"], runs["epochs_done"], runs["total_epochs"])],
+                     index=runs.index, dtype=object)
 
 
 def first_epoch_reaching(epoch: np.ndarray, values: np.ndarray, threshold: float) -> float:
@@ -283,7 +294,8 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
 
     ``curves``: :func:`smoothed_curves` of the complete runs; ``runs``: the run table (every run).
     Columns: task, config, total_epochs (K: one per config, its label says it), seeds (complete runs),
-    in_progress (its runs left out, not complete), mu_eps (the mean rate: the run table's, the median over seeds
+    in_progress (its runs left out, neither complete nor failed: the run list names failed runs),
+    mu_eps (the mean rate: the run table's, the median over seeds
     for an adaptive schedule; a configuration without complete runs: its fixed schedule's eq. 10, NaN if adaptive),
     final_median (median over seeds of final success), auc (mean over epochs 1..K
     of the median curve), epochs_to_0.5 / epochs_to_0.9 (first epoch the median curve
@@ -299,8 +311,9 @@ def summary_table(curves: pd.DataFrame, runs: pd.DataFrame, seed: int = BOOTSTRA
         finals[key] = group["final"].to_numpy()
         grids[key] = common_grid(group["final_grid"])
     medians = dict(list(median_curves(curves).groupby(GROUP, observed=True)))
+    runs = runs.assign(running=~runs["complete"] & (runs["error"] == ""))  # neither complete nor failed
     configs = runs.groupby(GROUP, observed=True).agg(
-        total_epochs=("total_epochs", "first"), in_progress=("complete", lambda done: int((~done).sum())),
+        total_epochs=("total_epochs", "first"), in_progress=("running", "sum"),
         adaptive=("adaptive", "first"), mu_eps_any=("mu_eps", "median"))
     configs["mu_eps"] = runs[runs["complete"]].groupby(GROUP, observed=True)["mu_eps"].median()
     configs["mu_eps"] = configs["mu_eps"].fillna(configs["mu_eps_any"].where(~configs["adaptive"].astype(bool)))
@@ -612,22 +625,24 @@ SCHEDULE_CURVE_COLUMNS = ["line", "configs", "schedule", "constant_rate", "adapt
 
 
 def schedule_curves(runs: pd.DataFrame, epochs: pd.DataFrame) -> pd.DataFrame:
-    """The per-epoch rates eps(k), k = 1..K, of every schedule of the runs: one line per distinct schedule and K
-    that does not adapt (its own rates; the configurations sharing it, e.g. HER and ARCHER, share the line), and
-    one per task and configuration whose schedule adapts (the rates its runs realised: the logs' relabel_rate,
-    median over seeds at each epoch they reached).
+    """The per-epoch rates eps(k), k = 1..K, of every schedule of the runs, as their logs recorded them: one line
+    per distinct schedule and K that does not adapt (the configurations sharing it, e.g. HER and ARCHER, share the
+    line; its logged rates, median over its runs at each epoch, and where none of them has logged an epoch yet, its
+    class's rates when the class gives the logged ones: :func:`fixed_rates`), and one per task and configuration
+    whose schedule adapts (the rates its runs realised: the logs' relabel_rate, median over seeds at each epoch
+    they reached).
 
     ``runs`` / ``epochs``: the tables of :mod:`analysis.load`. Returns columns SCHEDULE_CURVE_COLUMNS: line (its
-    legend label: the configurations' labels, an adaptive line's task added), configs (the first configuration's
+    legend label: :func:`line_label`, an adaptive line's task added), configs (the first configuration's
     label: its style), the schedule's kind and settings, total_epochs, epoch, eps; in the registry's order of kinds,
     then by beta1, beta2, eps, K.
     """
     fixed, frames = runs[~runs["adaptive"].astype(bool)], []
     for (record, total), group in fixed.groupby(["schedule_record", "total_epochs"], sort=False):
-        schedule = schedule_from_record(json.loads(record))
         configs = [str(config) for config in group["config"].drop_duplicates().sort_values()]  # config order
-        frames.append(_schedule_line(group.iloc[0], ", ".join(configs), configs[0], np.arange(1, total + 1),
-                                     schedule.epoch_rates(int(total))))
+        logged = epochs[epochs["run"].isin(group["run"])].groupby("epoch")["relabel_rate"].median()
+        epoch, eps = fixed_rates(record, int(total), logged)
+        frames.append(_schedule_line(group.iloc[0], line_label(configs, group.iloc[0]), configs[0], epoch, eps))
     adaptive = epochs[epochs["adaptive"].astype(bool)]
     for (task, config), group in adaptive.groupby(["task", "config"], observed=True):
         rates = group.groupby("epoch")["relabel_rate"].median()
@@ -640,6 +655,34 @@ def schedule_curves(runs: pd.DataFrame, epochs: pd.DataFrame) -> pd.DataFrame:
     curves = curves.sort_values(["order", "adaptive", "beta1", "beta2", "eps_setting", "total_epochs", "line", "epoch"],
                                 kind="stable")
     return curves[SCHEDULE_CURVE_COLUMNS].reset_index(drop=True)
+
+
+LINE_CONFIGS = 3  # a schedule shared by more configurations than this is named by its label, not theirs
+
+
+def line_label(configs: list[str], run: pd.Series) -> str:
+    """Fig. 1's legend entry of a schedule its configurations share: their labels, or, for more than
+    LINE_CONFIGS (learner variants of one schedule, say), the schedule's label and how many share it."""
+    if len(configs) <= LINE_CONFIGS:
+        return ", ".join(configs)
+    return f"{run['schedule_label']} ({len(configs)} configurations: {configs[0]} and others)"
+
+
+def fixed_rates(record: str, total_epochs: int, logged: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+    """(epoch, eps) of a schedule that does not adapt: the ``logged`` rates (epoch -> rate, shape (n,)), and for the
+    epochs 1..K none of its runs has logged yet, the rates of its class (``record``: the schedule's record as JSON)
+    when that class can be imported and gives every logged rate; else the logged epochs alone."""
+    epoch, eps = logged.index.to_numpy(dtype=int), logged.to_numpy(dtype=float)
+    if len(epoch) >= total_epochs:
+        return epoch, eps
+    try:
+        rates = schedule_from_record(json.loads(record)).epoch_rates(total_epochs)
+    except Exception:  # noqa: BLE001 - a class not importable here, or whose rate raises: the logged rates alone
+        return epoch, eps
+    if not np.allclose(rates[epoch - 1], eps, rtol=0.0, atol=RATE_TOLERANCE):
+        return epoch, eps
+    rates[epoch - 1] = eps
+    return np.arange(1, total_epochs + 1), rates
 
 
 def _schedule_line(run: pd.Series, line: str, config: str, epoch: np.ndarray, eps: np.ndarray) -> pd.DataFrame:

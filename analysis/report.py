@@ -20,6 +20,9 @@ Output (``<FOLDER>/report`` unless ``--out``)::
                                  per-seed tables of docs/RESULTS.md
     search/<study>_*             each Optuna study's beta-plane figure and best trials
 
+``hersd-report FOLDER --tensorboard DIR`` writes the runs' TensorBoard event files to DIR instead
+(analysis.tensorboard_export; docs/ANALYSIS.md, "TensorBoard").
+
 Needs neither torch nor MuJoCo. Bad input is one line on stderr and exit status 2. The logs
 are read, and the figures drawn, in worker processes, one per core (analysis.workers); the
 modules that compute and draw (scipy, matplotlib) are imported while the logs are read, and the statistics
@@ -45,15 +48,18 @@ import pandas as pd
 
 from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_animations, file_name,
                                  place_after_curves)
-from analysis.claims import claims_table
+from analysis.claims import full_claims_table
 from analysis.critic import GOAL_TYPES, bias_evaluations, bias_tests, integrated_bias
 from analysis.load import ReportInputError, RunTable, start_reading
-from analysis.metrics import GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_states
+from analysis.metrics import (GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_state,
+                              run_states)
 from analysis.provenance import provenance_html, provenance_table, run_cost
 from analysis.seeds import seed_values
 from analysis.studies import StudyStorage, open_study_storage
 from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
+from analysis.tensorboard_export import export_events
+from hersd.contract.errors import ConfigError, DiskFullError, full_disk
 from analysis.workers import ForkedMap
 from hersd.contract.tasks import task_rank, task_title
 
@@ -75,7 +81,9 @@ TABLE_NOTES = {
     "claims": ("The seed paper's claims, each against hersd's measurement on the complete runs here "
                "(analysis/claims.py): the statistic of both configurations, their seeds, the exact permutation "
                "test and its p (with the smallest p the seed counts allow), and the verdict those numbers support "
-               f"at the 5 % level. tables/claims.csv; docs/RESULTS.md opens with the same tables."),
+               "at the 5 % level; the medians and the seeds' means the test compares; each hypothesis registered "
+               "before its runs (docs/registered.csv) with the commit that registered it; the paper's claims no run "
+               f"measures yet. tables/claims.csv; docs/RESULTS.md opens with the same tables."),
     "summary": ("One row per task and configuration, with its number of epochs K (runs of different K are "
                 "different configurations: their labels say K where the runs differ in it, but for the paper's 200). "
                 "Only complete runs enter this and every "
@@ -264,14 +272,14 @@ def _html_page(folder: Path, table: RunTable, analysis: Analysis, images: list[t
     policy animations after its learning curves), studies, runs."""
     runs = table.runs
     parts = [f"<h1>hersd report: {html.escape(str(folder))}</h1>",
-             f"<p>{_count(len(runs), 'run')} ({int((~runs['complete']).sum())} in progress: drawn in the learning "
+             f"<p>{_count(len(runs), 'run')} ({_unfinished(runs)}: drawn in the learning "
              "curves only, left out of every table and median), "
              f"{_count(runs['task'].nunique(), 'task')}, {_count(runs['config'].nunique(), 'configuration')}; "
              f"test success smoothed over {_count(analysis.window, 'epoch')}.</p>"]
     skipped = table.warnings() + [f"skipped study storage {line}" for line in studies.skipped]
     if skipped:
-        parts.append("<p>Skipped:</p><ul>" + "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
-                     + "</ul>")
+        items = "".join(f"<li>{html.escape(line)}</li>" for line in skipped)
+        parts.append(f"<p>Logs skipped, damaged, failed or read without their class:</p><ul>{items}</ul>")
     if not claims.empty:
         parts += ["<h2>The paper's claims, measured</h2>", f"<p>{TABLE_NOTES['claims']}</p>", html_table(_titled(claims))]
     parts += ["<h2>Summary per task and configuration</h2>", f"<p>{TABLE_NOTES['summary']}</p>",
@@ -340,19 +348,26 @@ def _variant_html(tests: pd.DataFrame) -> list[str]:
             f"<p>{TABLE_NOTES['variants']}</p>", html_table(_titled(tests))]
 
 
+def _unfinished(runs: pd.DataFrame) -> str:
+    """``2 in progress``, or ``1 in progress, 1 failed`` when some run stopped with an error."""
+    failed = int((runs["error"] != "").sum())
+    text = f"{int((~runs['complete']).sum()) - failed} in progress"
+    return text + (f", {failed} failed" if failed else "")
+
+
 def _run_list(analysis: Analysis) -> pd.DataFrame:
     """The run table with each run's state and own outcomes (:func:`analysis.metrics.run_outcomes`)."""
     runs = analysis.runs
     return runs.assign(state=run_states(runs)).merge(analysis.outcomes, on="run", how="left")
 
 
-def run_state_words(complete: bool, damaged: bool, done: int, total: int) -> str:
-    """A run's state as the page's run list says it: ``complete``, or ``in progress (epoch N of K)`` for a log
-    without its completion marker (a run still running, stopped or killed); ``, log without a valid end`` added
-    for a damaged log (an earlier-format log of a run running or killed, or a file cut short: the epochs before
-    the cut are read)."""
-    state = "complete" if complete else f"in progress (epoch {done} of {total})"
-    return state + (", log without a valid end" if damaged else "")
+def run_state_words(complete: bool, damaged: bool, done: int, total: int, error: str = "") -> str:
+    """A run's state as the page's run list says it: ``complete``, ``failed (epoch N of K): <error>`` for a run that
+    stopped with an error, or ``in progress (epoch N of K)`` for a log without its completion marker (a run still
+    running, stopped or killed) (:func:`analysis.metrics.run_state`); ``, log without a valid end`` added for a
+    damaged log (an earlier-format log of a run running or killed, or a file cut short: the epochs before the cut
+    are read)."""
+    return run_state(complete, error, done, total) + (", log without a valid end" if damaged else "")
 
 
 def _titled(table: pd.DataFrame) -> pd.DataFrame:
@@ -376,7 +391,7 @@ def _runs_html(analysis: Analysis) -> list[str]:
     runs = runs.merge(seconds, left_on="run", right_index=True, how="left").assign(
         run_folder=[Path(path).parent.name for path in runs["path"]],
         state=[run_state_words(*values) for values in
-               zip(runs["complete"], runs["damaged"], runs["epochs_done"], runs["total_epochs"])])
+               zip(runs["complete"], runs["damaged"], runs["epochs_done"], runs["total_epochs"], runs["error"])])
     summary = analysis.summary.set_index(["task", "config"])
     ranks = runs["task"].map(lambda task: task_rank(task)[0])  # the paper's tasks first, then by name
     runs = runs.assign(task_order=ranks).sort_values(["task_order", "task", "config", "seed"])  # config: categorical
@@ -384,8 +399,11 @@ def _runs_html(analysis: Analysis) -> list[str]:
     for (task, config), group in runs.groupby(["task", "config"], observed=True, sort=False):
         done = int(group["complete"].sum())
         line = f"{task_title(task)} · {config}: {_count(len(group), 'run')}, {done} complete"
-        if len(group) > done:
-            line += f", {len(group) - done} in progress"
+        failed = int((group["error"] != "").sum())
+        if len(group) > done + failed:
+            line += f", {len(group) - done - failed} in progress"
+        if failed:
+            line += f", {failed} failed"
         if done:
             row = summary.loc[(task, config)]
             line += (f"; test success at epoch {int(group.loc[group['complete'], 'total_epochs'].max())}, median "
@@ -468,13 +486,27 @@ def _report_tables(table: RunTable, analysis: Analysis) -> tuple[dict[str, pd.Da
     tables = _analysis_tables(analysis)
     if not (critic_tests := _critic_tests(table.epochs)).empty:
         tables["critic_bias_tests"] = critic_tests
-    if not (claims := claims_table(analysis.summary, analysis.tests, critic_tests)).empty:
+    per_seed = seed_values(table.runs, table.epochs, analysis.curves, analysis.outcomes)
+    if not (claims := full_claims_table(analysis.summary, analysis.tests, critic_tests, per_seed)).empty:
         tables["claims"] = claims
     tables["runs_provenance"] = provenance_table(table.runs, table.epochs, table.sessions)
     if not (evaluations := bias_evaluations(table.epochs)).empty:
         tables["bias_evaluations"] = evaluations
-    tables["per_seed"] = seed_values(table.runs, table.epochs, analysis.curves, analysis.outcomes)
+    tables["per_seed"] = per_seed
     return tables, critic_tests, claims
+
+
+def _say_loaded(table: RunTable, seconds: float, log: Callable[[str], None], warn: Callable[[str], None]) -> None:
+    """The terminal's account of the logs read: one warning line per log skipped, damaged, failed, read without its
+    class or holding other rates than its class gives (:meth:`analysis.load.RunTable.warnings`), then the counts."""
+    for line in table.warnings():
+        warn(f"warning: {line}")
+    runs = table.runs
+    failed = int((runs["error"] != "").sum())
+    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete"
+        f"{f', of which {failed} failed' if failed else ''}, {table.left_out} "
+        f"skipped), {_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
+        f"{_count(runs['config'].nunique(), 'configuration')} in {seconds:.1f} s")
 
 
 def build_report(folder: str | Path, out: str | Path | None = None, tasks: Sequence[str] | None = None,
@@ -497,12 +529,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
     table = _load(folder, tasks, algos, timings)
-    for line in table.warnings():
-        warn(f"warning: {line}")
+    _say_loaded(table, timings["load"], log, warn)
     runs = table.runs
-    log(f"loaded {_count(len(runs), 'run')} ({int((~runs['complete']).sum())} incomplete, {table.left_out} "
-        f"skipped), {_count(len(table.epochs), 'epoch')}, {_count(runs['task'].nunique(), 'task')}, "
-        f"{_count(runs['config'].nunique(), 'configuration')} in {timings['load']:.1f} s")
     studies = _read_studies(given, folder)
     for line in studies.skipped:
         warn(f"warning: skipped study storage {line}")
@@ -522,7 +550,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         analysis = with_statistics(analysis)  # while the workers draw
         timings["statistics"] = time.perf_counter() - start
         tables, critic_tests, claims = _report_tables(table, analysis)
-        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns="run")}, out / "tables")
+        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns=["run", "error"])}, out / "tables")
         written += _write_studies(studies, out / "search")
         timings["tables"] = time.perf_counter() - start - timings["statistics"]
         images = drawing.results()
@@ -595,17 +623,45 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="also draw the Optuna studies of this storage, opened read-only: a SQLAlchemy URL "
                              "(e.g. postgresql+psycopg2://user@host/db), journal:<file>, or a .db / .log / "
                              ".journal file; repeatable (the storages in FOLDER/search/ are always read)")
+    parser.add_argument("--tensorboard", type=Path, metavar="DIR",
+                        help="write each run's TensorBoard event files to DIR/<task>/<label>/seed<N> instead of a "
+                             "report, replacing earlier ones (needs the tensorboard package; docs/ANALYSIS.md)")
     args = parser.parse_args(argv)
+    if args.tensorboard is not None:
+        return _tensorboard(args)
     try:
         result = build_report(args.folder, args.out, tasks=args.task, algos=args.algo, window=args.smooth,
                               fmt=args.format, storages=args.storage)
     except ReportInputError as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # a full disk: one line (the report's files are rewritten whole by the next report)
+        if not full_disk(err):
+            raise
+        out = err.filename or (args.out if args.out is not None else args.folder / "report")
+        print(f"hersd-report: error: {DiskFullError(out, None, 'free some and run hersd-report again')}",
+              file=sys.stderr)
+        return 2
     timings = result.timings
     print(f"report written to {result.index} (load {timings['load']:.1f} s incl. imports {timings['imports']:.1f} s, "
           f"metrics {timings['metrics']:.1f} s, figures {timings['figures']:.1f} s (meanwhile statistics "
           f"{timings['statistics']:.1f} s, tables {timings['tables']:.1f} s), writing {timings['writing']:.1f} s)")
+    return 0
+
+
+def _tensorboard(args: argparse.Namespace) -> int:
+    """``--tensorboard DIR``: the runs' event files (analysis.tensorboard_export), no report."""
+    try:
+        written = export_events(args.folder, args.tensorboard, tasks=args.task, algos=args.algo)
+    except (ReportInputError, ConfigError) as err:
+        print(f"hersd-report: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:
+        print(f"hersd-report: error: cannot write the event files to {args.tensorboard}: {err.strerror} "
+              f"({err.filename}); choose another --tensorboard folder", file=sys.stderr)
+        return 2
+    print(f"TensorBoard event files of {len(written)} runs written to {args.tensorboard} "
+          f"(tensorboard --logdir {args.tensorboard})")
     return 0
 
 

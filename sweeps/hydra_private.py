@@ -7,6 +7,8 @@ when a Hydra release changes them; hydra-core is pinned in pyproject.toml).
   the scan makes ``super()`` fail inside Hydra).
 - :func:`grid_overrides`: the grid of ``hydra.sweeper.params`` as override strings
   (``BasicSweeper._parse_config``), which the sweeper joins with the command line's.
+- :func:`cap_local_workers`: the joblib launcher's settings as its ``launch`` hands them to joblib
+  (``JoblibLauncher.joblib``), whose ``n_jobs`` the sweep lowers to its jobs' count.
 - :func:`job_error`: the exception of a failed job (``JobReturn._return_value``; the public
   ``return_value`` re-raises it instead).
 - :func:`group_test` and :func:`apply_value_overrides`: how Hydra's composition tells a group
@@ -34,6 +36,14 @@ def basic_sweeper_class() -> type:
 def grid_overrides(sweeper: Any) -> list[str]:
     """``hydra.sweeper.params`` as overrides, e.g. ``["seed=range(5)", "task=push"]``."""
     return sweeper._parse_config()
+
+
+def cap_local_workers(launcher: Any, jobs: int) -> None:
+    """At most ``jobs`` workers for a joblib launcher (its ``joblib`` settings; other launchers are left as they
+    are): loky starts every worker at once, and one that never gets a job never learns that the sweep ended."""
+    settings = getattr(launcher, "joblib", None)
+    if settings is not None and int(settings.get("n_jobs") or 0) > jobs:
+        settings["n_jobs"] = jobs
 
 
 def job_error(result: JobReturn) -> Any:

@@ -63,8 +63,8 @@ def with_threads(job: list[str], threads: int) -> list[str]:
 def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
     from hersd.contract.runstore import RunFolder, check_writable
-    from sweeps.launchers import check_launcher
-    from sweeps.plan import SweepConfig, SweepError, plan_runs
+    from sweeps.launchers import check_launcher, watched_by_jobs
+    from sweeps.plan import SweepConfig, SweepError, plan_runs, trainable_here
 
     global _composed
     _composed = True
@@ -81,8 +81,8 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
           f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
     at_once = concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"])
-    if at_once is not None:  # they train here: refuse now what this machine cannot run, not in each job
-        check_machine_here({run.machine for directory, run in planned.items() if states[directory] != "complete"})
+    if at_once is not None:  # they train here: skip now what this machine cannot run (all of them: refused)
+        planned = trainable_here(planned, states)
     if sweeper.dry_run:
         list_runs(planned, at_once)
         return []
@@ -99,6 +99,8 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
+    if at_once is not None:  # they train here: each job process ends with this one (sweeps.launchers)
+        watched_by_jobs(sweeper.launcher, len(to_launch))
     results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])
     return [results]
@@ -124,15 +126,11 @@ def list_runs(planned: dict, at_once: int | None) -> None:
 
 def check_machine_here(machines: set[tuple[str, str]]) -> None:
     """SweepError (exit 2) if this machine cannot train a run of one of these (device, precision) pairs,
-    e.g. ``precision=bf16`` on a CPU without bf16 instructions (:func:`hersd.engine.resources.check_machine`)."""
-    from hersd.engine.resources import check_machine  # torch: only for a sweep that trains here
-    from sweeps.plan import SweepError
+    e.g. ``precision=bf16`` on a CPU without bf16 instructions (:func:`sweeps.plan.refused_here`)."""
+    from sweeps.plan import SweepError, refused_here
 
-    for device, precision in sorted(machines):
-        try:
-            check_machine(device, precision)
-        except ConfigError as err:
-            raise SweepError(str(err), exit_code=2) from None
+    if refused := refused_here(machines):
+        raise SweepError(refused[min(refused)], exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
@@ -189,10 +187,12 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     """Train one run of the sweep; never raises, so one failure does not stop the others."""
     from hydra.core.hydra_config import HydraConfig
 
-    from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
+    from hersd.contract.runstore import ERROR_NAME, RunFolder, RunLockedError, run_dir
     from hersd.engine.train import train
+    from sweeps.launchers import end_with_sweep
     from sweeps.plan import job_train_config
 
+    end_with_sweep()
     hydra_cfg = HydraConfig.get()
     train_cfg = job_train_config(cfg)
     directory = run_dir(train_cfg)
@@ -205,7 +205,7 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     except RunLockedError:
         outcome["status"] = "busy"
     except Exception:  # noqa: BLE001 - any failure is this run's alone; it is reported, the sweep goes on
-        error_log = directory / "error.log"
+        error_log = directory / ERROR_NAME
         error_log.parent.mkdir(parents=True, exist_ok=True)
         error_log.write_text(traceback.format_exc())
         outcome.update(status="failed", error_log=str(error_log))

@@ -2,16 +2,31 @@
 launcher (:func:`check_launcher`, from :mod:`sweeps.launch`) and ``hersd-search``'s SLURM workers
 (:func:`check_slurm`, from :mod:`sweeps.search.workers`). SLURM is asked (``sinfo``) the same way for both, and a
 bad setting is one line naming it: exit 2, before any run or job.
+
+The lifetime of a sweep's local workers: a sweep whose jobs train on this machine names its main process to them
+(:func:`watched_by_jobs`), and each job process ends within a second of that process, however it ends (``kill -9``
+included: no signal reaches a worker then, and joblib's loky workers would otherwise train on and idle for minutes,
+holding their runs' locks, so a re-run would find them "running elsewhere"). Each job polls it
+(:func:`end_with_sweep`) rather than asking the kernel for a signal at its parent's death (``PR_SET_PDEATHSIG``):
+that signal follows the parent *thread* that started the worker, is Linux-only, and submitit's local jobs are
+grandchildren. Once the workers are gone, the resource trackers they share with the main process see their pipes
+close and end too. SLURM jobs (their own allocation, another machine) are never watched.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
+import time
+from pathlib import Path
 from typing import Any, Mapping
 
 from omegaconf import DictConfig
 
 from hersd.contract.cores import available_cores
 from hersd.contract.errors import ConfigError
+from sweeps.hydra_private import cap_local_workers
 from sweeps.plan import SweepError
 
 SLURM_RESOURCES = {"timeout_min": "minutes", "cpus_per_task": "CPUs", "mem_gb": "GB of memory"}  # per job
@@ -65,3 +80,65 @@ def check_launcher(launcher: DictConfig, submits: bool = True) -> None:
         raise SweepError(f"hydra.launcher.n_jobs={n_jobs}: give the number of runs to train at once, 1 or more, "
                          f"or ${{hersd_cores:}} for one per core ({available_cores()} here, the default of "
                          "hydra/launcher=local)", exit_code=2)
+
+
+SWEEP_ENV = "HERSD_SWEEP_PROCESS"  # "<pid>:<start time>" of the sweep's main process, for its local jobs
+POLL_SECONDS = 0.5  # how often a job looks for the sweep's main process
+_watching: list[str] = []  # the process this job process watches (once per process: loky reuses its workers)
+
+
+def process_start(pid: int) -> str:
+    """When process ``pid`` started (``/proc/<pid>/stat``'s field 22, clock ticks since boot): with the pid it names
+    one process, whose pid the system may reuse once it is gone; "" where /proc is absent (not Linux), "gone" if
+    there is no such process."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except FileNotFoundError:
+        return "gone" if Path("/proc/self/stat").exists() else ""
+    except (OSError, IndexError):
+        return ""
+
+
+def alive(pid: int, start: str) -> bool:
+    """Whether the process ``pid`` that started at ``start`` (:func:`process_start`) still runs."""
+    if start:
+        return process_start(pid) == start
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
+
+
+def watched_by_jobs(launcher: Any, jobs: int) -> None:
+    """In a sweep's main process, before its ``jobs`` start on this machine: name this process to them
+    (:data:`SWEEP_ENV`, inherited by the processes the launcher starts), and start no more joblib workers than
+    jobs (:func:`sweeps.hydra_private.cap_local_workers`: a worker without a job would never watch)."""
+    cap_local_workers(launcher, jobs)
+    os.environ[SWEEP_ENV] = f"{os.getpid()}:{process_start(os.getpid())}"
+
+
+def end_with_sweep() -> None:
+    """In a job process of a sweep that trains here (:data:`SWEEP_ENV` set): a daemon thread that ends this
+    process (one line on stderr) within :data:`POLL_SECONDS` of the sweep's main process; once per process. Its
+    run keeps what its log and checkpoint hold (both written atomically): a re-run of the sweep resumes it."""
+    named = os.environ.get(SWEEP_ENV)
+    if not named or _watching == [named]:
+        return
+    _watching[:] = [named]
+    pid, _, start = named.partition(":")
+    if int(pid) == os.getpid():  # a launcher that runs the jobs in the sweep's own process
+        return
+    threading.Thread(target=_end_after, args=(int(pid), start), daemon=True, name="hersd-sweep-watch").start()
+
+
+def _end_after(pid: int, start: str) -> None:
+    while alive(pid, start):
+        time.sleep(POLL_SECONDS)
+    try:
+        print(f"hersd-sweep: the sweep's main process (pid {pid}) is gone; its worker {os.getpid()} ends with it "
+              "(its run resumes when the same command runs again)", file=sys.stderr, flush=True)
+    finally:
+        os._exit(1)

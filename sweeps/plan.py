@@ -16,7 +16,11 @@ point leaves every arm with seeds in equal number (one apart at most), not a few
 and the rest missing. A run named twice is planned once, where it first appears.
 
 ``seeds=N`` sweeps ``seed`` over 0..N-1 in every grid that sets no ``seed`` of its own, unless
-the command line sets ``seed``: ``hersd-sweep task=reach seeds=3`` is three runs.
+the command line sets ``seed``: ``hersd-sweep task=reach seeds=3`` is three runs; ``seeds=`` and ``seed=``
+on one command line are refused (one line, exit 2), not one silently dropped.
+
+A sweep that trains here skips, one line each, the runs this machine cannot train (``precision=bf16`` on a CPU
+without bf16 instructions) and trains the rest; one that can train none of them is refused (:func:`trainable_here`).
 
 Every run is composed and checked before any starts. Hydra composes a config per distinct set
 of group choices (``task=push``, ``schedule=linear``); a run's other overrides (``seed=0``,
@@ -196,6 +200,9 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
         if override.key_or_group == "grid" and override.is_sweep_override():  # Hydra would read no grid's params
             raise SweepError(f"{override.input_line}: a sweep runs one grid; run hersd-sweep once per grid",
                              exit_code=2)
+        if override.key_or_group == "seeds" and seed_of(arguments) is not None:  # seed= would win in silence
+            raise SweepError(f"{override.input_line} with seed={seed_of(arguments)}: give seed=N (or seed=a,b) for "
+                             "those seeds, or seeds=N for seeds 0..N-1, not both", exit_code=2)
     seeds = int(sweeper.config.seeds)
     jobs = [job for stage in grid_stages(sweeper.grid)
             for job in seed_by_seed([expand(with_seeds(grid, arguments, seeds), arguments, parser) for grid in stage])]
@@ -215,3 +222,31 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
             said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
             raise SweepError(f"run [{' '.join(job)}]: {said}", exit_code=2) from None
     return planned
+
+
+def refused_here(machines: set[tuple[str, str]]) -> dict[tuple[str, str], str]:
+    """(device, precision) -> the one line saying why this machine cannot train runs of it (e.g. ``precision=bf16``
+    on a CPU without bf16 instructions: :func:`hersd.engine.resources.check_machine`), for each it cannot train."""
+    from hersd.engine.resources import check_machine  # torch: only for a sweep that trains here
+
+    refused = {}
+    for device, precision in sorted(machines):
+        try:
+            check_machine(device, precision)
+        except ConfigError as err:
+            refused[(device, precision)] = str(err)
+    return refused
+
+
+def trainable_here(planned: dict[Path, PlannedRun], states: dict[Path, str]) -> dict[Path, PlannedRun]:
+    """The planned runs this machine can train or that are complete; each other run is skipped with one line
+    (``sweep: skipped <dir>: <why>``), so a campaign whose first stage needs bf16 goes on to the next on a CPU
+    without it. SweepError (exit 2, the reason) when it can train none of the runs left to do."""
+    refused = refused_here({run.machine for directory, run in planned.items() if states[directory] != "complete"})
+    skipped = [directory for directory, run in planned.items()
+               if states[directory] != "complete" and run.machine in refused]
+    if skipped and len(skipped) == sum(state != "complete" for state in states.values()):
+        raise SweepError(refused[min(refused)], exit_code=2)
+    for directory in skipped:
+        print(f"sweep: skipped {directory}: {refused[planned[directory].machine]}", flush=True)
+    return {directory: run for directory, run in planned.items() if directory not in skipped}

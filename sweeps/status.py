@@ -4,6 +4,8 @@ store's files only (its log, checkpoint and lock file), so it works while runs a
 - ``complete``   the log has its complete marker;
 - ``running``    a live process holds the run's lock (the pid it recorded in ``run.lock``):
                  ``epoch N of K``, that pid, the recent pace and the time to go;
+- ``failed``     it stopped with an error (``error.log`` newer than its log): the error's first line, the
+                 epochs logged; a re-run resumes it (a checkpoint) or starts it afresh;
 - ``resumable``  ``epoch N of K`` logged and a checkpoint to resume from;
 - ``new``        nothing yet, or a log without checkpoint (set aside when the run starts again).
 
@@ -83,6 +85,8 @@ def run_status(directory: Path, epochs: int, now: float | None = None) -> RunSta
     left = max(epochs - len(done), 0)
     if holder is not None:
         return RunStatus("running", ", ".join(detail), left, pace, holder)
+    if (error := folder.error()) is not None:
+        return RunStatus("failed", ", ".join([error, *detail]), left if folder.checkpoint.exists() else epochs)
     if folder.checkpoint.exists():
         return RunStatus("resumable", ", ".join(detail), left)
     if detail:

@@ -29,13 +29,15 @@ def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path)
     write_campaign_midway(tmp_path)
     analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
     (figure,) = learning_curve_figures(analysis)
-    assert "Thin dashed lines: runs still in progress" in figure.caption
+    assert "Thin lines: runs still in progress" in figure.caption
     linear_panel, exp_panel = figure.draw().axes
     lines = {line.get_label(): line for line in linear_panel.get_lines()}
     assert set(lines) == {"HER", "HER (in progress)", "linear b1=0.5", "linear b1=0.5 (in progress)"}
     assert lines["HER (in progress)"].get_ydata().tolist() == [1.0] * 4  # the run's own moving average
     assert lines["HER (in progress)"].get_linewidth() < lines["HER"].get_linewidth()
-    assert lines["HER (in progress)"].get_linestyle() == "--"
+    # in its configuration's colour and dashes: two configurations of one colour stay apart in progress too
+    assert (lines["HER (in progress)"].get_color(), lines["HER (in progress)"].get_linestyle()) == \
+        (lines["HER"].get_color(), lines["HER"].get_linestyle())
     assert lines["HER (in progress)"].get_marker() == "None"  # a line of 4 epochs needs no dots
     assert lines["HER"].get_ydata()[-1] == pytest.approx((0.8 + 2.6 / 3) / 2)  # the complete seeds' median
     exp_lines = {line.get_label() for line in exp_panel.get_lines()}
@@ -239,3 +241,126 @@ def test_every_figure_keeps_its_text_legible_at_the_pages_width(tmp_path):
         assert min(sizes) >= SMALLEST_FONT, figure.name
         width = drawn.get_size_inches()[0] * 100
         assert min(1.0, 1248 / width) * SMALLEST_FONT * 100 / 72 >= 9, (figure.name, width)
+
+
+# --- a deliberately mixed folder (issue 68): three tasks, K = 2, 3 and 200, two outside schedule classes, six learners
+
+def _mixed_run(folder, name: str, task: str, epochs: int, seed: int = 0, done: int | None = None,
+               schedule: dict | None = None, learner: dict | None = None) -> None:
+    """One synthetic run: HER unless ``schedule`` (a record: an outside class's) or ``learner`` (a record) is given;
+    ``done`` epochs of ``epochs`` logged (all: complete); its rates those of the schedule's class."""
+    from hersd.contract.config import config_record
+    from hersd.contract.schedules import schedule_from_record
+
+    done = epochs if done is None else done
+    config = make_config(task=task, seed=seed, epochs=epochs)
+    record = config_record(config)
+    fields, meta = {}, {"config": record, "run_id": name}
+    if schedule is not None:
+        record["schedule"] = schedule
+        fields["relabel_rate"] = schedule_from_record(schedule).epoch_rates(epochs)[:done]
+        fields["share_hindsight"] = fields["relabel_rate"]
+    if learner is not None:
+        record["learner"] = learner
+    write_run(folder / name, config, np.linspace(0, 1, epochs)[:done], complete=done == epochs, meta=meta, **fields)
+
+
+def _mixed_folder(folder) -> None:
+    k_step = {"kind": "newcomer_steps.KStep", "high": 0.9, "low": 0.5, "k0": 1}
+    warp = {"kind": "newcomer_steps.Warp", "beta1": 0.4, "beta2": 0.5}
+    for seed in (0, 1):
+        _mixed_run(folder, f"push_her200_{seed}", "push", 200, seed)
+        _mixed_run(folder, f"push_step2_{seed}", "push", 2, seed, schedule=k_step)
+        _mixed_run(folder, f"reach_her3_{seed}", "reach", 3, seed)
+        _mixed_run(folder, f"reach_step3_{seed}", "reach", 3, seed, schedule={**k_step, "k0": 2})
+        _mixed_run(folder, f"reach_warp3_{seed}", "reach", 3, seed, schedule=warp)
+        _mixed_run(folder, f"slide_her2_{seed}", "slide", 2, seed)
+        _mixed_run(folder, f"slide_warp200_{seed}", "slide", 200, seed, schedule=warp)
+    _mixed_run(folder, "push_linear200", "push", 200, done=60,
+               schedule={"kind": "linear", "eps": 0.8, "beta1": 0.25, "beta2": 0.0, "mean_rate": None, "window": 10,
+                         "eps_min": 0.0})
+    learners = [{"name": "td3"}, {"name": "sac"}, {"name": "newcomer_learners.DDPGTN", "newcomer_learners.DDPGTN":
+                {"warm": 0, "tau_scale": 1.0}}, {"name": "newcomer_learners.DDPGTN", "newcomer_learners.DDPGTN":
+                {"warm": 5, "tau_scale": 2.0}},
+                {"name": "newcomer_learners.TD3Scaled", "newcomer_learners.TD3Scaled": {"noise_scale": 1.0}}]
+    for index, learner in enumerate(learners):  # with ddpg's runs above: six learner variants of HER at K = 2 and 3
+        _mixed_run(folder, f"push_learner{index}", "push", 2, learner=learner)
+        for seed, done in ((0, 3), (1, 2)):  # on reach a seed of each in progress too: a long legend
+            _mixed_run(folder, f"reach_learner{index}_{seed}", "reach", 3, seed, done=done, learner=learner)
+    _mixed_run(folder, "push_her2", "push", 2)
+
+
+def _dash(artist) -> tuple:
+    """An artist's line style as drawn: its dash pattern (offset, on-off lengths), None when solid."""
+    offset, dashes = artist._unscaled_dash_pattern
+    return (offset, tuple(dashes)) if dashes else None
+
+
+def _configuration(label: str) -> str:
+    """The configuration a legend label names (unwrapped): without `` (in progress)`` or `` (failed)``."""
+    label = " ".join(label.split())
+    for suffix in (" (in progress)", " (failed)"):
+        label = label.removesuffix(suffix)
+    return label
+
+
+def _panel_items(axis) -> list[tuple[str, np.ndarray, tuple]]:
+    """(label, x values, (colour, dash)) of each labelled line and step of a panel; its filled areas' x values with
+    label ""."""
+    items = [(line.get_label(), np.asarray(line.get_xdata(), float),
+              (matplotlib.colors.to_hex(line.get_color()), _dash(line)))
+             for line in axis.get_lines() if len(line.get_xdata()) and not line.get_label().startswith("_")]
+    items += [(patch.get_label(), np.asarray(patch.get_data().edges, float),
+               (matplotlib.colors.to_hex(patch.get_edgecolor()), _dash(patch)))
+              for patch in axis.patches if isinstance(patch, StepPatch)]
+    items += [("", np.concatenate([path.vertices[:, 0] for path in collection.get_paths()]), None)
+              for collection in axis.collections if collection.get_paths() and collection.get_gid() is None]
+    return items
+
+
+def test_every_figure_of_a_mixed_folder_stays_legible(tmp_path, monkeypatch):
+    """Mixed K cut the composition panels to epochs 1-2 (the last set_xlim won on a shared axis), legends ran off
+    the canvas, two configurations were drawn in one black style, 3-epoch runs squashed on a 0-200 axis."""
+    from user_schedules import write_module
+
+    (tmp_path / "mods").mkdir()
+    monkeypatch.syspath_prepend(str(write_module(tmp_path / "mods")))
+    _mixed_folder(tmp_path / "runs")
+    table = load_runs(tmp_path / "runs")
+    assert set(table.runs["task"]) == {"push", "reach", "slide"} and set(table.runs["total_epochs"]) == {2, 3, 200}
+    assert table.runs["learner"].nunique() == 5 and not table.rate_mismatches  # ddpg, td3, sac and two outside
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    figures = all_figures(analysis)
+    assert {"schedules", "composition_push", "q_mean", "mean_rate_push"} <= {figure.name for figure in figures}
+    for report_figure in figures:
+        figure = report_figure.draw()
+        canvas = FigureCanvasAgg(figure)
+        canvas.print_png(tmp_path / f"{report_figure.name}.png")  # as the report saves it: the artists' final places
+        renderer = canvas.get_renderer()
+        for legend in figure.legends:
+            box = legend.get_window_extent(renderer)
+            assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= figure.bbox.x1 and box.y1 <= figure.bbox.y1, \
+                (report_figure.name, box, figure.bbox)
+        for axis in figure.axes:
+            items = _panel_items(axis)
+            low, high = axis.get_xlim()
+            for label, x, _ in items:  # the panel's x range covers every run it draws
+                assert low - 1e-9 <= x.min() and x.max() <= high + 1e-9, (report_figure.name, axis.get_title(), label)
+            if not report_figure.name.startswith("mean_rate"):  # one K per panel: its complete lines end at K, which
+                complete = [x for label, x, _ in items if " ".join(label.split()) == _configuration(label)]  # fills it
+                ends = {x.max() for x in complete}
+                assert len(ends) <= 1 and (not ends or max(ends) - low >= 0.9 * (high - low)), \
+                    (report_figure.name, axis.get_title(), ends, (low, high))
+            styles: dict[tuple, set[str]] = {}
+            for label, _, style in items:
+                if style is not None:
+                    styles.setdefault(style, set()).add(_configuration(label))
+            shared = {style: configs for style, configs in styles.items() if len(configs) > 1}
+            assert not shared, (report_figure.name, axis.get_title(), shared)
+    composition = next(figure for figure in figures if figure.name == "composition_push").draw()
+    her200 = next(axis for axis in composition.axes if axis.get_title() == "HER")
+    assert her200.get_xlim() == (0.0, 200.0) and [line.get_xdata()[0] for line in her200.get_lines()] == [150]
+    step = next(axis for axis in composition.axes if axis.get_title().startswith("kstep"))
+    hindsight = step.collections[-1].get_paths()[0].vertices  # the top band, drawn as steps: its lower edge jumps at
+    assert step.get_xlim() == (0.0, 2.0)
+    assert len({round(y, 6) for x, y in hindsight if x == 1.0 and y < 0.999}) == 2  # epoch 1

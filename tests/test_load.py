@@ -135,7 +135,9 @@ def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, ca
 
     assert report_main([str(tmp_path), "--smooth", "2"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["warning: skipped unreadable log garbage/run.mcap: not a hersd run log (no run metadata found)"]
+    # the terminal names every log skipped or damaged, not only the page (the damaged one was named nowhere else)
+    assert err == ["warning: skipped unreadable log garbage/run.mcap: not a hersd run log (no run metadata found)",
+                   "warning: damaged log cut/run.mcap: read its 3 epochs before the damage"]
 
 
 def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
@@ -222,7 +224,8 @@ def test_copies_of_one_run_count_once_the_complete_or_longest_read(tmp_path, cap
 
 
 def test_a_schedule_module_that_fails_to_import_is_one_warning_saying_to_fix_it(tmp_path, monkeypatch, capsys):
-    """A SyntaxError in the class's module was a traceback that stopped the report."""
+    """A SyntaxError in the class's module was a traceback that stopped the report; then its runs were skipped.
+    They are reported from their logs, labelled from their records, with one line saying how to get the class's."""
     write_run(tmp_path / "her", make_config(), np.zeros(6))
     record = config_record(make_config())
     record["schedule"] = {"kind": "broken_steps_load.Step", "k0": 3}
@@ -234,7 +237,11 @@ def test_a_schedule_module_that_fails_to_import_is_one_warning_saying_to_fix_it(
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line.startswith("warning: schedule class broken_steps_load.Step: importing broken_steps_load raised "
                            "SyntaxError")
-    assert line.endswith("1 run log skipped (step/run.mcap); fix that module to read them")
+    assert line.endswith("1 run log reported from its logged rates and labelled from the log (step/run.mcap); "
+                         "fix that module for the class's own label and a check of its rates")
+    runs = load_runs(tmp_path).runs.set_index("path")
+    assert runs.loc["step/run.mcap", "config"] == "step k0=3" and runs.loc["step/run.mcap", "schedule"] == \
+        "broken_steps_load.Step"
 
 
 def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_path):
@@ -255,3 +262,91 @@ def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_pa
 def test_archer_is_recognised_by_its_logged_name_and_its_weights_read_from_its_preset(algo, lambda_h, mep, label):
     assert load.ARCHER_WEIGHTS == (1.0, 0.5)  # conf/algo/archer.yaml
     assert config_label(ScheduleConfig("constant", eps=0.8), 1.0, lambda_h, mep, algo=algo) == label
+
+
+# A newcomer's step schedule as its runs were made (eps 0.9 at epoch 1, 0.5 after: k <= k0) and as edited since
+# (k < k0: 0.5 at every epoch), in a module of its own per test (a module is imported once per process).
+EDITED_STEP = '''
+from dataclasses import dataclass
+
+from hersd.contract.schedules import Schedule, param
+
+
+@dataclass
+class KStep(Schedule):
+    high: float = param(0.9, 0.0, 1.0, "the rate until epoch k0")
+    low: float = param(0.5, 0.0, 1.0, "the rate after epoch k0")
+    k0: int = param(1, 1, 100, "the last epoch at the high rate", integer=True)
+
+    def rate(self, k, total_epochs, train_success=()):
+        return self.high if k {compare} self.k0 else self.low
+'''
+
+
+def _write_step_runs(folder: Path, module: str, epochs: int = 2) -> None:
+    """Two complete seeds of ``<module>.KStep`` (K = ``epochs``) whose logs recorded 0.9 then 0.5, a HER seed, and
+    a third KStep seed in progress at epoch 1 of 3."""
+    write_run(folder / "her", make_config(epochs=epochs), np.zeros(epochs))
+    for seed, total, done in ((0, epochs, epochs), (1, epochs, epochs), (2, 3, 1)):
+        record = config_record(make_config(seed=seed, epochs=total))
+        record["schedule"] = {"kind": f"{module}.KStep", "high": 0.9, "low": 0.5, "k0": 1}
+        write_run(folder / f"step{seed}", make_config(seed=seed, epochs=total), np.zeros(done), complete=done == total,
+                  meta={"config": record, "run_id": f"step{seed}"}, relabel_rate=np.array([0.9, 0.5, 0.5][:done]))
+
+
+def _rates_of(table, config: str) -> list[float]:
+    curves = metrics.schedule_curves(table.runs, table.epochs)
+    return curves.loc[curves["configs"] == config, "eps"].tolist()
+
+
+def test_rates_and_mu_eps_come_from_the_log_and_an_edited_class_is_one_warning_per_configuration(tmp_path,
+                                                                                                 monkeypatch):
+    """The class was edited after its runs (<= became <): the report drew them as a flat 0.5 and gave mu_eps 0.5,
+    silently, though their logs recorded 0.9 then 0.5 (issue 68, item 1)."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "edited_steps_load.py").write_text(EDITED_STEP.replace("{compare}", "<"))
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    _write_step_runs(tmp_path / "runs", "edited_steps_load")
+    table = load_runs(tmp_path / "runs")
+    steps = table.runs[table.runs["schedule"] == "edited_steps_load.KStep"].set_index("path")
+    assert steps.loc[["step0/run.mcap", "step1/run.mcap"], "mu_eps"].tolist() == [0.7, 0.7]
+    assert np.isnan(steps.loc["step2/run.mcap", "mu_eps"])  # in progress, its class not giving its rates: unknown
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=2") == [0.9, 0.5]
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=3") == [0.9]  # the class's rates are not drawn
+    assert table.rate_mismatches == [
+        "configuration kstep high=0.9 low=0.5 k0=1 K=2: schedule class edited_steps_load.KStep today gives other rates "
+        "than 2 of its logs (step0/run.mcap, epoch 1: logged 0.9, class 0.5); the report uses the logged rates",
+        "configuration kstep high=0.9 low=0.5 k0=1 K=3: schedule class edited_steps_load.KStep today gives other "
+        "rates than 1 of its logs (step2/run.mcap, epoch 1: logged 0.9, class 0.5); the report uses the logged rates"]
+    assert all(line in table.warnings() for line in table.rate_mismatches)
+
+
+def test_a_class_that_gives_the_logged_rates_completes_the_curve_of_a_run_in_progress(tmp_path, monkeypatch):
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "kept_steps_load.py").write_text(EDITED_STEP.replace("{compare}", "<="))
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    _write_step_runs(tmp_path / "runs", "kept_steps_load")
+    table = load_runs(tmp_path / "runs")
+    assert not table.rate_mismatches
+    steps = table.runs.set_index("path")
+    assert steps.loc["step2/run.mcap", "mu_eps"] == pytest.approx(1.9 / 3)  # 0.9 logged, then the class's 0.5, 0.5
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=3") == [0.9, 0.5, 0.5]
+
+
+def test_runs_whose_class_cannot_be_imported_are_reported_from_their_logs(tmp_path):
+    """Without the module on PYTHONPATH the report skipped these runs, though their logs hold every rate."""
+    _write_step_runs(tmp_path, "gone_steps_load")
+    table = load_runs(tmp_path)
+    steps = table.runs[table.runs["schedule"] == "gone_steps_load.KStep"].set_index("path")
+    assert len(steps) == 3 and table.left_out == 0
+    assert steps["config"].astype(str).tolist() == ["kstep high=0.9 low=0.5 k0=1 K=2"] * 2 + ["kstep high=0.9 low=0.5 "
+                                                                                          "k0=1 K=3"]
+    assert steps["schedule_tag"].iloc[0] == "kstep-high_0.9-low_0.5-k0_1"
+    assert steps.loc[["step0/run.mcap", "step1/run.mcap"], "mu_eps"].tolist() == [0.7, 0.7]
+    assert not steps["adaptive"].any()  # its seeds' logs agree: a fixed schedule
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=2") == [0.9, 0.5]
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=3") == [0.9]  # the logged epoch alone
+    (line,) = table.missing_schedules
+    assert line.startswith("schedule class gone_steps_load.KStep cannot be imported") and "3 run logs reported" in line
+    analysis = metrics.analyse(table.runs, table.epochs, window=1)
+    assert "kstep high=0.9 low=0.5 k0=1 K=2" in set(analysis.summary["config"])

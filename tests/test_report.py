@@ -250,7 +250,7 @@ def test_the_readme_opening_gives_fetchpickandplaces_numbers_as_the_committed_ta
     gain = 100 * (linear["final_median"] / her["final_median"] - 1)
     assert f"{linear['seeds']} complete seeds each" in text and her["seeds"] == linear["seeds"]
     assert (f"at epoch 200 {linear['final_median']:.4g} with the linear decay against {her['final_median']:.4g} "
-            f"with HER ({gain:+.1f} %; one-sided permutation p = {test['p_final']:.2g})") in text
+            f"with HER ({gain:+.1f} %; one-sided permutation p = {test['p_final']:.2g} for the decay") in text
     assert f"0.5 first reached at epoch {linear['epochs_to_0.5']:.0f} against {her['epochs_to_0.5']:.0f}" in text
 
 
@@ -260,7 +260,7 @@ def test_the_readme_opening_quotes_every_measured_row_of_the_committed_claims_ta
     root = Path(__file__).resolve().parent.parent
     text = " ".join((root / "README.md").read_text(encoding="utf-8").split("\nHindsight experience replay")[0].split())
     claims = pd.read_csv(root / "results/report/tables/claims.csv", dtype=str, keep_default_na=False)
-    measured = claims[claims["verdict"] != "not measured yet"]
+    measured = claims[pd.to_numeric(claims["p"], errors="coerce").notna()]  # not measured, registered: no p
     assert len(measured) > 0
     tasks = {"push": "FetchPush", "pick_and_place": "FetchPickAndPlace", "slide": "FetchSlide"}
     for row in measured.itertuples():
@@ -343,3 +343,43 @@ def test_a_folder_of_ones_own_given_as_out_keeps_its_files(sweep, tmp_path):
     (out / "tables" / "notes.md").write_text("mine", encoding="utf-8")
     assert report_main([str(sweep), "--out", str(out), "--task", "push"]) == 0
     assert (out / "figures" / "fig1.pdf").exists() and (out / "tables" / "notes.md").exists()
+
+
+def test_a_full_disk_while_the_report_writes_is_one_line_naming_the_folder_with_exit_2(hand_sized, tmp_path, capsys,
+                                                                                      monkeypatch):
+    import errno
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", full)
+    assert exit_status([str(hand_sized), "--out", str(tmp_path / "report")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"hersd-report: error: no space left on the device of "
+                                                   f"{tmp_path / 'report'}: writing it needs more space")
+    assert err.strip().endswith("; free some and run hersd-report again")
+
+
+def test_a_run_that_stopped_with_an_error_is_failed_in_the_tables_page_and_terminal(tmp_path, capsys):
+    """A crashed run with an error.log beside its log was shown "in progress (epoch 1 of 2)"."""
+    write_run(tmp_path / "done", make_config(epochs=2), np.ones(2))
+    write_run(tmp_path / "running", make_config(epochs=2, seed=1), np.ones(1), complete=False)
+    crashed = write_run(tmp_path / "crashed", make_config(epochs=2, seed=2), np.ones(1), complete=False)
+    error = crashed.parent / "error.log"
+    error.write_text('Traceback (most recent call last):\n  File "train.py", line 9, in train\n    save()\n'
+                     "OSError: [Errno 28] No space left on device\n")
+    stamp = crashed.stat().st_mtime + 1
+    import os
+    os.utime(error, (stamp, stamp))
+    out = tmp_path / "report"
+    assert report_main([str(tmp_path), "--out", str(out), "--smooth", "1"]) == 0
+    printed = capsys.readouterr()
+    assert "loaded 3 runs (2 incomplete, of which 1 failed, 0 skipped)" in printed.out
+    assert "warning: failed run crashed/run.mcap: OSError: [Errno 28] No space left on device" in printed.err
+    runs = pd.read_csv(out / "tables" / "runs.csv").set_index("path")
+    assert runs.loc["crashed/run.mcap", "state"] == "failed (epoch 1 of 2): OSError: [Errno 28] No space left on device"
+    assert runs.loc["running/run.mcap", "state"] == "in progress (epoch 1 of 2)"
+    assert pd.read_csv(out / "tables" / "summary.csv")["in_progress"].tolist() == [1]  # the failed run is not
+    page = (out / "index.html").read_text(encoding="utf-8")
+    assert "1 in progress, 1 failed" in page and "in progress (epoch 1 of 2)" in page
+    assert "failed (epoch 1 of 2): OSError: [Errno 28] No space left on device" in page

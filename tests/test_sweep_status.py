@@ -82,3 +82,24 @@ def test_a_dry_run_read_in_part_ends_quietly(tmp_path):
                             stderr=subprocess.PIPE, text=True)
     os.close(write)
     assert (listed.returncode, listed.stderr) == (-signal.SIGPIPE, "")
+
+
+def test_a_run_that_stopped_with_an_error_is_failed_with_the_first_line_of_its_error(tmp_path):
+    """A sweep's run that raised (its traceback in error.log, written after its log) is ``failed``, never a run
+    to resume or start as if nothing happened; a log written after the error (the run went on) is not."""
+    write_log(tmp_path / "crashed", 2)
+    (tmp_path / "crashed" / "checkpoint.pt").write_bytes(b"")
+    error = tmp_path / "crashed" / "error.log"
+    error.write_text("Traceback (most recent call last):\n  File \"train.py\", line 3, in <module>\n    step()\n"
+                     "RuntimeError: [enforce fail at inline_container.cc:672]\n  more of its message\n")
+    log_time = (tmp_path / "crashed" / "run.mcap").stat().st_mtime
+    os.utime(error, (log_time + 5, log_time + 5))
+    status = run_status(tmp_path / "crashed", 200, now=log_time + 60)
+    assert status.state == "failed" and status.epochs_left == 198
+    assert status.detail.startswith("RuntimeError: [enforce fail at inline_container.cc:672], epoch 2 of 200")
+    (tmp_path / "at_start").mkdir()  # failed before its first epoch: no log, no checkpoint
+    (tmp_path / "at_start" / "error.log").write_text("Traceback (most recent call last):\n  File \"x\"\nOSError: "
+                                                      "[Errno 28] No space left on device\n")
+    assert run_status(tmp_path / "at_start", 2) == RunStatus("failed", "OSError: [Errno 28] No space left on device", 2)
+    os.utime(error, (log_time - 5, log_time - 5))  # the run was resumed after the error: the log is newer
+    assert run_status(tmp_path / "crashed", 200).state == "resumable"

@@ -76,6 +76,8 @@ def test_iso_mu_grid_lies_in_the_optimal_band(tmp_path):
     (["+grid=smoke", "no_such_key=1"], "no_such_key is not a sweep setting; see hersd-sweep --help"),
     (["+grid=smoke", "seed=a"], "seed: Value 'a' of type 'str' could not be converted to Integer"),
     (["+grid=smoke", "seeds=0"], "seeds must be >= 1, got 0"),
+    (["task=reach", "seeds=2", "seed=3"], "seeds=2 with seed=3: give seed=N (or seed=a,b) for those seeds, or "
+                                          "seeds=N for seeds 0..N-1, not both"),
     (["schedule=linear,exponential", "schedule.beta1=3"],
      "run [seed=0 schedule=linear schedule.beta1=3 RESULTS]: schedule.beta1 must be a number in [0, 1], got 3"),
 ])
@@ -287,6 +289,28 @@ def group_alive(group: int, seconds: float = 10.0) -> bool:
             return False
         time.sleep(0.1)
     return True
+
+
+def test_the_workers_end_within_seconds_of_a_killed_sweep_and_the_same_command_finishes_their_runs(tmp_path):
+    """kill -9 of the sweep's main process alone (no signal reaches its workers): its two workers, training,
+    and the resource trackers they share end within seconds; the same command then resumes both runs."""
+    args = ["+grid=smoke", "schedule=constant", "seeds=2", "epochs=10", *TINY, "hydra.launcher.n_jobs=2",
+            f"results_dir={tmp_path}"]
+    proc = subprocess.Popen([*SWEEP, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.monotonic() + 300
+    while len(list(tmp_path.rglob("checkpoint.pt"))) < 2 and time.monotonic() < deadline:  # both runs training
+        time.sleep(0.2)
+    assert proc.poll() is None
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not group_alive(proc.pid, seconds=5)  # the workers and the resource trackers are gone
+    result = sweep(*args)
+    assert "2 resumed, 0 running elsewhere, 0 failed" in result.stdout, result.stdout
+    for log_path in tmp_path.rglob("run.mcap"):
+        log = read_run(log_path)
+        assert log.complete and list(log.epochs["epoch"]) == list(range(1, 11))
+        assert len(log.sessions) == 2 and log.sessions[1]["resumed_from_epoch"] >= 1
 
 
 def test_ctrl_c_ends_a_sweep_with_one_line_and_exit_130_and_keeps_its_work(tmp_path):

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from helpers import TINY as TINY_RUN, metrics
 
+import hersd.engine.resources as resources
 from hersd.engine.cli import main
 from hersd.contract.compose import compose_train as compose
 from hersd.contract.cores import available_cores
@@ -366,6 +367,18 @@ def test_help_is_generated_from_the_schema(capsys):
     assert "ddpg.polyak=0.95" in out and "threads=auto" in out and "task=custom|hand_block|hand_reach|pick_and_place|push|reach|slide" in out
 
 
+@pytest.mark.parametrize("has_bf16, bf16_runs", [(True, "yes"), (False, "no: this CPU has no bf16 instructions")])
+def test_help_says_which_update_paths_this_cpu_runs(capsys, monkeypatch, has_bf16, bf16_runs):
+    monkeypatch.setattr(resources, "cpu_has_bf16", lambda: has_bf16)
+    main(["--help"])
+    lines = {line.split()[0] + " " + line.split()[1]: line for line in capsys.readouterr().out.splitlines()
+             if line.startswith(("  fp32 ", "  bf16 "))}
+    assert set(lines) == {"fp32 autograd", "fp32 fast", "bf16 autocast", "bf16 fast"}
+    assert lines["fp32 fast"].endswith("yes") and "update=fast (ddpg, td3)" in lines["fp32 fast"]
+    assert bf16_runs in lines["bf16 fast"] and "precision=bf16 update=fast" in lines["bf16 fast"]
+    assert bf16_runs in lines["bf16 autocast"]
+
+
 def test_the_commit_is_dirty_for_changed_code_not_for_changed_results(tmp_path, monkeypatch):
     """A run records ``<commit>-dirty`` when tracked code differs from the commit; run logs and reports
     below results/ are data the runs write, so a checkout whose only changes are there is clean."""
@@ -388,3 +401,74 @@ def test_the_commit_is_dirty_for_changed_code_not_for_changed_results(tmp_path, 
     assert train_module._git_commit() == clean
     (tmp_path / "hersd/__init__.py").write_text("1")
     assert train_module._git_commit() == clean + "-dirty"
+
+
+def test_dry_run_prints_the_resolved_run_and_writes_nothing(tmp_path, capsys):
+    args = [*TINY, "epochs=3", "schedule=linear", "schedule.beta1=0.25", f"results_dir={tmp_path / 'runs'}"]
+    main([*args, "--dry-run"])
+    lines = capsys.readouterr().out.splitlines()
+    cfg = compose(args)
+    assert lines[:3] == [f"run: {run_dir(cfg)} (new)", f"identity: {run_dir(cfg).name.split('-')[-1]}", "settings:"]
+    assert {"  epochs=3", "  schedule.kind=linear", "  schedule.beta1=0.25", "  quiet=true"} <= set(lines[3:])
+    assert not (tmp_path / "runs").exists()
+
+
+def _fill_the_disk_at_epoch_3(monkeypatch, where: str) -> None:
+    """From epoch 3 on the disk is full: the log's write (its fsync, where a full disk can first show) or the
+    checkpoint's torch.save (some bytes written, then torch's RuntimeError raised while its OSError is handled,
+    as torch does) fails with ENOSPC."""
+    import contextlib
+    import errno
+    import io
+
+    import torch
+
+    import hersd.engine.train as train_module
+
+    full = {"on": False}
+    run_epoch, fsync, save = train_module.run_epoch, os.fsync, torch.save
+
+    def filling_run_epoch(state, epoch):
+        full["on"] = epoch >= 3
+        return run_epoch(state, epoch)
+
+    def full_fsync(fd):
+        if full["on"]:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        fsync(fd)
+
+    def full_save(obj, f, *args, **kwargs):
+        if not full["on"] or not isinstance(f, (str, os.PathLike, io.BufferedWriter)):  # a counter stores nothing
+            return save(obj, f, *args, **kwargs)
+        with open(f, "wb") if isinstance(f, (str, os.PathLike)) else contextlib.nullcontext(f) as stream:
+            stream.write(b"\0" * 512)
+        try:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        except OSError:
+            raise RuntimeError("[enforce fail at inline_container.cc:672] . unexpected pos 704 vs 598")
+
+    monkeypatch.setattr(train_module, "run_epoch", filling_run_epoch)
+    monkeypatch.setattr(os, "fsync", full_fsync) if where == "log" else monkeypatch.setattr(torch, "save", full_save)
+
+
+@pytest.mark.parametrize("where, name", [("log", "run.mcap"), ("checkpoint", "checkpoint.pt")])
+def test_a_full_disk_is_one_line_with_exit_2_keeps_the_last_epoch_checkpointed_and_the_run_resumes(
+        tmp_path, capsys, monkeypatch, where, name):
+    args = [*TINY, "epochs=4", f"results_dir={tmp_path / 'cut'}"]
+    _fill_the_disk_at_epoch_3(monkeypatch, where)
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    monkeypatch.undo()  # space freed
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    directory = run_dir(compose(args))
+    assert err.startswith(f"hersd-train: error: no space left on the device of {directory / name}: writing it needs ")
+    assert len(err.splitlines()) == 1 and err.endswith("the run keeps epochs 1-2: free some and run the same command "
+                                                       "again to resume at epoch 3")
+    assert sorted(path.name for path in directory.iterdir()) == ["checkpoint.pt", "run.lock", "run.mcap"]  # no .tmp
+    assert list(read_run(directory).epochs["epoch"]) == ([1, 2] if where == "log" else [1, 2, 3])
+    main(args)
+    reference = train(compose([*TINY, "epochs=4", f"results_dir={tmp_path / 'ref'}"]))
+    log = read_run(directory)
+    assert log.complete and [s["resumed_from_epoch"] for s in log.sessions] == [0, 2]
+    pd.testing.assert_frame_equal(metrics(directory / "run.mcap"), metrics(reference))

@@ -26,6 +26,7 @@ from hersd.contract.learner_registry import learner_class, recorded_name
 from hersd.contract.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
 from hersd.contract.schedules.registry import raised
 from hersd.contract.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
+from hersd.contract.tensorboard_events import require_tensorboard
 
 GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
@@ -450,9 +451,9 @@ class TrainConfig:
     # The updates' matrix products: fp32 | bf16 (hidden layers in bfloat16, all else float32; docs/LEARNERS.md,
     # "Precision"; a CPU without bf16 instructions refuses it). Part of the run's identity (fp32 adds nothing).
     precision: str = "fp32"
-    # The updates' passes: autograd | fast (forward and backward written by hand, fp32, ddpg and td3; other sums'
-    # order than autograd's, so not bit-identical to it; docs/LEARNERS.md, "The fast update"). Part of the
-    # run's identity (autograd adds nothing).
+    # The updates' passes: autograd | fast (forward and backward written by hand, ddpg and td3, at either precision:
+    # with bf16, bf16 copies of float32 master weights; other sums' order than autograd's, so not bit-identical to
+    # it; docs/LEARNERS.md, "The fast update"). Part of the run's identity (autograd adds nothing).
     update: str = "autograd"
     # Treat denormal floats (|x| < 1.2e-38) as zero in the run's torch work (updates, acting, bias evaluation,
     # animations; every intra-op thread; the physics stays IEEE), as the reference's TensorFlow does for its
@@ -461,9 +462,15 @@ class TrainConfig:
     # times slower. false retraces runs made without it. Changes floating-point results as a CPU type does:
     # logged, not part of the run's identity.
     flush_denormal: bool = True
+    # Also write TensorBoard event files, <run dir>/tensorboard/, one step per epoch as it ends (every /epoch
+    # number, the settings as text and hparams; hersd/contract/tensorboard_events.py). Needs the tensorboard
+    # package (pip install -e ".[tensorboard]"); not part of the run's identity.
+    tensorboard: bool = False
 
     def __post_init__(self) -> None:
         _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
+        if self.tensorboard:
+            require_tensorboard()
         _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
         _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
         _check(self.render_every >= 0, f"render_every must be >= 0 (0: never), got {self.render_every}")
@@ -478,8 +485,6 @@ class TrainConfig:
         _check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
         _check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
                no_fast_update(self.learner.name))
-        _check(self.update == "autograd" or self.precision == "fp32",
-               "update=fast is a float32 path: use it with precision=fp32")
         if isinstance(self.schedule, Schedule):
             self.schedule = settle(self.schedule, self.epochs)
         else:

@@ -8,6 +8,7 @@ the search. Light (no torch): a sweep plans hundreds of runs with it.
 - ``run.lock``        held (``flock``) by the process running it, so a run never runs twice at once;
                       it holds that process's pid while held (:meth:`RunFolder.holder`);
 - ``policy/epoch_<k>.gif``  an animation of the policy's test episodes after epoch k (:mod:`hersd.engine.render`);
+- ``error.log``       the traceback of a sweep's run that stopped with an error (:meth:`RunFolder.error`);
 - ``run.<why>-<time>.mcap`` / ``checkpoint.<why>-<time>.pt``  files kept aside, never deleted.
 
 The hash covers every config field that changes what the run computes
@@ -37,10 +38,11 @@ from hersd.contract.schedules.base import FLAT_RECORD
 
 CHECKPOINT_NAME = "checkpoint.pt"
 LOCK_NAME = "run.lock"
+ERROR_NAME = "error.log"  # a failed run's traceback, written by the sweep that ran it
 POLICY_DIR = "policy"  # the run's policy animations: policy/epoch_<k>.gif
 # Fields that change where, how loudly or how fast a run is written, not what it computes.
 NOT_HASHED = ("results_dir", "run_dir", "quiet", "checkpoint_every", "keep_checkpoint", "threads", "device",
-              "flush_denormal", "render_every", "bias")
+              "flush_denormal", "render_every", "bias", "tensorboard")
 # Fields added to the schema after runs were made: left out of the hash while they hold this
 # value, so every earlier run keeps its directory (dotted path -> the value of earlier runs).
 HASHED_UNLESS: dict[str, Any] = {**{f"schedule.{name}": FLAT_RECORD[name] for name in ("window", "eps_min")},
@@ -108,6 +110,19 @@ class RunFolder:
         """The log read back (every completed epoch, even mid-run), None without a log; RunLogError if unreadable."""
         return read_records(self.log) if self.log.exists() else None
 
+    def error(self) -> str | None:
+        """The first line of the error that stopped the run (the exception line of ``error.log``'s traceback),
+        None when it has no error log, or when its log was written after it (the run went on since)."""
+        path = self.path / ERROR_NAME
+        try:
+            stopped = path.stat().st_mtime
+            text = path.read_text(errors="replace")
+        except OSError:
+            return None
+        if self.log.exists() and self.log.stat().st_mtime > stopped:
+            return None
+        return error_line(text)
+
     def state(self) -> str:
         """``complete`` (its log says so), ``resumable`` (a checkpoint exists) or ``new``."""
         try:
@@ -163,6 +178,17 @@ class RunFolder:
         except PermissionError:  # alive, another user's
             pass
         return pid
+
+
+def error_line(text: str) -> str:
+    """The first line of the error a traceback's text ends with (the first line after its last frame's
+    ``  File ...`` line and the code lines under it), else the text's first non-empty line; ``unknown error``
+    for an empty text."""
+    lines = [line for line in text.splitlines() if line.strip()]
+    frames = [index for index, line in enumerate(lines) if line.startswith('  File "')]
+    after = lines[frames[-1] + 1:] if frames else lines
+    error = next((line for line in after if not line.startswith("    ")), "unknown error")  # past code and carets
+    return " ".join(error.split())
 
 
 def remove_if_unused(directory: Path, up_to: Path) -> None:

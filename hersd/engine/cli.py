@@ -20,13 +20,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, DiskFullError
 
 if TYPE_CHECKING:
     from hersd.contract.config import TrainConfig
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
 HELP_FLAGS = ("-h", "--help")
+DRY_RUN_FLAG = "--dry-run"  # print the resolved run (folder, identity, settings) and train nothing
 _FIELD_LINE = re.compile(r"^\s+(\w+):[^=]+=.*?(?:#\s*(.*))?$")
 
 
@@ -163,6 +164,20 @@ def learner_lines(argv: list[str]) -> list[str]:
     return ["", "learners named on the command line (their settings):", *lines] if lines else []
 
 
+def update_path_lines() -> list[str]:
+    """The update paths (precision x update) and whether this CPU runs each: the bf16 ones need bf16
+    instructions (docs/LEARNERS.md, "Precision"; their speed per CPU model: docs/RESULTS.md, "Speed")."""
+    from hersd.contract.config import FAST_UPDATE_LEARNERS
+    from hersd.engine.resources import cpu_has_bf16
+
+    bf16 = "yes" if cpu_has_bf16() else "no: this CPU has no bf16 instructions (refused in one line)"
+    fast = f"update=fast ({', '.join(FAST_UPDATE_LEARNERS)})"
+    paths = [("fp32 autograd", "the default", "yes"), ("fp32 fast", fast, "yes"),
+             ("bf16 autocast", "precision=bf16", bf16), ("bf16 fast", f"precision=bf16 {fast}", bf16)]
+    return ["update paths (precision x update; each a run identity of its own) and whether this CPU runs them:",
+            *(f"  {name:<14} {command:<38} {runs}" for name, command, runs in paths)]
+
+
 def usage(argv: list[str] = ()) -> str:
     """The --help text; an outside schedule class the command line names (``schedule._target_=...``) is listed
     with the package's kinds, and a learner it names beyond the package's with its settings (ConfigError if
@@ -171,17 +186,38 @@ def usage(argv: list[str] = ()) -> str:
 
     groups = [f"  {group}={'|'.join(choices(group, argv))}" for group in GROUPS]
     return "\n".join([
-        "usage: hersd-train [KEY=VALUE ...]", "",
+        "usage: hersd-train [KEY=VALUE ...] [--dry-run]", "",
         "Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same",
         "command resumes an interrupted run from its last checkpoint. Defaults are the seed paper's",
-        "appendix settings. See docs/ARCHITECTURE.md.", "",
+        "appendix settings. --dry-run prints the resolved run (its folder and state, its identity,",
+        "every setting) and trains nothing. See docs/ARCHITECTURE.md.", "",
         "config groups (conf/<group>/*.yaml):", *groups, "",
         "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
         *schema_lines(TrainConfig), "",
+        *update_path_lines(), "",
         "schedules (eps(k): the relabel rate of epoch k = 1..K; schedule=<kind> or schedule.kind=<kind>, then its settings):",
         *schedule_lines(chosen_schedules(argv)),
         *learner_lines(argv),
     ])
+
+
+def dry_run_lines(cfg: TrainConfig) -> list[str]:
+    """``--dry-run``: the resolved run: its folder and state (:meth:`RunFolder.state`), its identity (the hash
+    of :func:`run_identity`) and every setting as ``key=value``, nested ones flattened with dots."""
+    from hersd.contract.config import config_record
+    from hersd.contract.runstore import RunFolder, config_hash, run_dir
+
+    directory = run_dir(cfg)
+    lines = [f"run: {directory} ({RunFolder(directory).state()})", f"identity: {config_hash(cfg)}", "settings:"]
+    pending = list(config_record(cfg).items())
+    while pending:
+        key, value = pending.pop(0)
+        if isinstance(value, dict):
+            pending[:0] = [(f"{key}.{name}", item) for name, item in value.items()]
+        else:
+            shown = "null" if value is None else str(value).lower() if isinstance(value, bool) else value
+            lines.append(f"  {key}={shown}")
+    return lines
 
 
 def _fail(message: str, code: int = 2) -> None:
@@ -189,9 +225,10 @@ def _fail(message: str, code: int = 2) -> None:
     sys.exit(code)
 
 
-def checked_config(argv: list[str]) -> TrainConfig:
+def checked_config(argv: list[str], writes: bool = True) -> TrainConfig:
     """The run config of a command line, its folders checked (created, writable, no file where the run's folder
-    goes); bad input ends the command with one line and exit code 2."""
+    goes) unless nothing is to be written (``writes`` False: a dry run); bad input ends the command with one line
+    and exit code 2."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
@@ -200,10 +237,10 @@ def checked_config(argv: list[str]) -> TrainConfig:
 
     try:
         cfg = compose_train(argv)
-        if cfg.run_dir is None:
+        if writes and cfg.run_dir is None:
             check_writable(Path(cfg.results_dir))
             check_run_path(run_dir(cfg), Path(cfg.results_dir))
-        else:
+        elif writes:
             check_writable(Path(cfg.run_dir), "run_dir")
     except ConfigError as err:
         _fail(str(err))
@@ -213,8 +250,8 @@ def checked_config(argv: list[str]) -> TrainConfig:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``hersd-train``; bad input ends with one line on stderr and exit code 2, a run whose
-    losses turn NaN or infinite, or whose schedule's rate raises, with one line and exit code 1, an interrupt (Ctrl-C) with one line
+    """Entry point of ``hersd-train``; bad input and a full disk end with one line on stderr and exit code 2,
+    a run whose losses turn NaN or infinite, or whose schedule's rate raises, with one line and exit code 1, an interrupt (Ctrl-C) with one line
     and exit code 130: in training, naming the folder that keeps the finished epochs; before it (the config
     composed, torch and MuJoCo loaded), saying so."""
     argv = sys.argv[1:] if argv is None else argv
@@ -225,7 +262,12 @@ def main(argv: list[str] | None = None) -> None:
             except ConfigError as err:
                 _fail(str(err))
             return
-        cfg = checked_config(argv)
+        dry_run = DRY_RUN_FLAG in argv
+        argv = [arg for arg in argv if arg != DRY_RUN_FLAG]
+        cfg = checked_config(argv, writes=not dry_run)
+        if dry_run:
+            print("\n".join(dry_run_lines(cfg)))
+            return
         from hersd.contract.runstore import RunLockedError, run_dir
         from hersd.contract.schedules import ScheduleRateRaised
         from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
@@ -240,7 +282,7 @@ def main(argv: list[str] | None = None) -> None:
         _fail(str(err))
     except RunLockedError as err:
         _fail(f"{err}; wait for it to finish")
-    except RunStateError as err:
+    except (RunStateError, DiskFullError) as err:
         _fail(str(err))
     except NonFiniteLossError as err:
         _fail(str(err), code=1)

@@ -8,6 +8,7 @@ exploration Generator, torch (network initialisation), the training envs and the
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ import numpy as np
 import torch
 
 from hersd.contract.config import TrainConfig
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, DiskFullError, full_disk
 from hersd.engine.envs.make import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.learners import GoalConditionedLearner, learner_class
@@ -184,10 +185,42 @@ def check_memory(cfg: TrainConfig, spec: EnvSpec, one_env_bytes: int) -> None:
 
 
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    """Write a state dict atomically (a temporary file renamed into place)."""
+    """Write a state dict atomically (a temporary file renamed into place). A write that fails leaves ``path``
+    as it was and no temporary file; on a full disk it raises :class:`DiskFullError` (one line: the file, the
+    bytes it needs, those free). Written through a Python stream, whose OSError torch keeps as the context of
+    its own RuntimeError (a path given to torch.save fails with an ``enforce fail`` alone)."""
     tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as stream:
+            torch.save(state, stream)
+        os.replace(tmp, path)
+    except BaseException as err:
+        tmp.unlink(missing_ok=True)
+        if full_disk(err):
+            raise DiskFullError(path, serialized_bytes(state)) from None
+        raise
+
+
+class _ByteCount(io.RawIOBase):
+    """A stream that keeps nothing and counts the bytes written to it (``size``)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.size = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: bytes) -> int:
+        self.size += len(data)
+        return len(data)
+
+
+def serialized_bytes(state: dict[str, Any]) -> int:
+    """The size of ``state``'s checkpoint file, serialized into a counter (nothing is stored)."""
+    counter = _ByteCount()
+    torch.save(state, counter)
+    return counter.size
 
 
 def load_checkpoint(path: Path, device: torch.device) -> dict[str, Any]:

@@ -24,16 +24,18 @@ import torch
 import hersd
 from hersd.engine.bias import GOAL_TYPES, BiasEvaluator
 from hersd.contract.config import TrainConfig, config_record
+from hersd.contract.errors import DiskFullError
 from hersd.engine.denormals import denormals_flushed, set_intra_op_threads, thread_flush_states
 from hersd.engine.learners import GoalConditionedLearner, UpdateStats, learner_class
 from hersd.engine.envs.make import step_success
 from hersd.engine.replay.buffer import Episodes, TransitionBatch, sample_transitions
-from hersd.engine.render import RenderError, render_policy, renders_at
+from hersd.engine.render import RenderError, owed_animation, render_policy, renders_at
 from hersd.contract.cores import resolve_threads
 from hersd.engine.resources import machine_info, resolve_device
 from hersd.engine.run_state import RunState, load_checkpoint, save_checkpoint
-from hersd.contract.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_run
+from hersd.contract.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_records, read_run
 from hersd.contract.runstore import RunFolder, config_hash, keep_aside, remove_if_unused, run_dir
+from hersd.contract.tensorboard_events import EVENTS_DIR, RunEvents
 
 EpochCallback = Callable[[dict], None]
 
@@ -274,13 +276,21 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
     _say(cfg, f"run {checkpoint_path.parent} ({f'resuming at epoch {state.epochs_done + 1}' if state.epochs_done else 'new'})")
     bias = BiasEvaluator(cfg.bias, cfg.task, cfg.seed, state.spec.horizon, state.gamma, state.reward,
                          cfg.flush_denormal)
+    saved = state.epochs_done  # the last epoch checkpointed: where a re-run resumes
+    # tensorboard=true: the event files restarted from the log as it stands (its epochs so far), then one step per epoch
+    events = RunEvents(checkpoint_path.parent / EVENTS_DIR, read_records(log.path)) if cfg.tensorboard else None
     try:
+        owed = owed_animation(RunFolder(checkpoint_path.parent), cfg.render_every, state.epochs_done, cfg.epochs)
+        if owed is not None:  # stopped while rendering it: the checkpoint holds that epoch's policy
+            animate(cfg, state, owed, checkpoint_path.parent)
         for epoch in range(state.epochs_done + 1, cfg.epochs + 1):
             record = run_epoch(state, epoch)
             check_finite(cfg, record)
             if bias.due(epoch):
                 record |= evaluate_bias(cfg, bias, state, epoch)
             log.write_epoch(record)
+            if events is not None:
+                events.write_epoch(record)
             _say(cfg, f"epoch {epoch:>4}/{cfg.epochs}  eps {record['relabel_rate']:.3f}  test "
                       f"{record['test_success']:.2f}  train {record['train_success']:.2f}  Q {record['q_mean']:7.2f}  "
                       f"{record['epoch_seconds']:.1f}s")
@@ -291,6 +301,7 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
                           f"({record['bias_seconds']:.1f} s)")
             if cfg.checkpoint_every and (epoch % cfg.checkpoint_every == 0 or epoch == cfg.epochs):
                 save_checkpoint(checkpoint_path, state.state_dict())
+                saved = epoch
             if renders_at(cfg.render_every, epoch, cfg.epochs):
                 animate(cfg, state, epoch, checkpoint_path.parent)
             if on_epoch is not None:
@@ -298,9 +309,21 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
         log.finish(cfg.epochs)
         if checkpoint_path.exists() and not cfg.keep_checkpoint:
             checkpoint_path.unlink()
+    except DiskFullError as err:
+        raise kept_on_full_disk(err, saved) from None
     finally:
         bias.close()
         log.close()
+        if events is not None:
+            events.close()
+
+
+def kept_on_full_disk(err: DiskFullError, saved: int) -> DiskFullError:
+    """``err`` saying what the run keeps: its log and checkpoint are whole on disk (each written atomically), and
+    a re-run resumes after ``saved``, the last epoch checkpointed (0: none, it starts afresh)."""
+    then = (f"the run keeps epochs 1-{saved}: free some and run the same command again to resume at epoch "
+            f"{saved + 1}" if saved else "the run keeps no epoch: free some and run the same command again to start it")
+    return DiskFullError(err.path, err.needed, then)
 
 
 def evaluate_bias(cfg: TrainConfig, bias: BiasEvaluator, state: RunState, epoch: int) -> dict[str, Any]:
