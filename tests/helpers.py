@@ -90,3 +90,16 @@ def command(module_main: str, args: list[str], module_dir: Path) -> subprocess.C
     result = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=600, env=env)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     return result
+
+
+def train_killed_at_epoch(args: list[str], epoch: int = 2) -> None:
+    """Run ``hersd-train args`` (``quiet=false``: it prints each epoch) in a fresh interpreter and SIGKILL it
+    as it prints epoch ``epoch``'s first line: the log then holds the epochs before it, and maybe that one."""
+    import signal
+    proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if line.startswith("epoch") and line.split()[1].startswith(f"{epoch}/"):
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL

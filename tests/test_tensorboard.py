@@ -2,9 +2,7 @@
 TensorBoard's own EventAccumulator, every /epoch field of a run at its step, live, after a kill and resume, and
 converted from committed logs; the setting without the package, one line and exit 2."""
 
-import os
 import shutil
-import signal
 import subprocess
 import sys
 from collections import Counter
@@ -12,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import TINY
+from helpers import TINY, train_killed_at_epoch
 from tensorboard.backend.event_processing import event_accumulator
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
 from tensorboard.backend.event_processing.plugin_event_multiplexer import EventMultiplexer
@@ -95,13 +93,7 @@ def test_tensorboard_is_no_part_of_the_run_identity():
 
 def test_a_killed_run_leaves_readable_files_and_its_resume_continues_them(tmp_path):
     args = [*SHORT, "epochs=3", f"results_dir={tmp_path}", "quiet=false"]
-    proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE, text=True)
-    for line in proc.stdout:
-        if line.startswith("epoch") and line.split()[1].startswith("2/"):
-            os.kill(proc.pid, signal.SIGKILL)
-            break
-    proc.wait()
-    assert proc.returncode == -signal.SIGKILL
+    train_killed_at_epoch(args)
     log = next(tmp_path.rglob("run.mcap"))
     killed = read_records(log)
     assert not killed.complete

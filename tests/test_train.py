@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import TINY as TINY_RUN, metrics
+from helpers import TINY as TINY_RUN, metrics, train_killed_at_epoch
 
 import hersd.engine.resources as resources
 from hersd.engine.cli import main
@@ -97,13 +97,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_metrics(tmp_path):
 
 def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
-    proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE, text=True)
-    for line in proc.stdout:
-        if line.startswith("epoch") and line.split()[1].startswith("2/"):
-            os.kill(proc.pid, signal.SIGKILL)
-            break
-    proc.wait()
-    assert proc.returncode == -signal.SIGKILL
+    train_killed_at_epoch(args)
     log_path = next((tmp_path / "cut").rglob("run.mcap"))
     killed = read_run(log_path)
     assert not killed.complete and 2 <= len(killed.epochs) <= 3
