@@ -42,7 +42,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import pandas as pd
 
@@ -59,7 +59,8 @@ from analysis.studies import StudyStorage, open_study_storage
 from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.tensorboard_export import export_events
-from hersd.contract.errors import ConfigError, DiskFullError, full_disk
+from hersd.contract.errors import ConfigError, DiskFullError, block_bytes, full_disk
+from hersd.contract.runlog import replace_file
 from analysis.workers import ForkedMap
 from hersd.contract.tasks import task_rank, task_title
 
@@ -215,19 +216,31 @@ def _read_studies(given: list[StudyStorage], folder: Path) -> Studies:
     return studies
 
 
+def write_whole(path: Path, data: bytes | str) -> Path:
+    """Write one of the report's files whole (a temporary file renamed into place): a write that fails leaves no
+    temporary file, and on a full disk raises :class:`DiskFullError` naming ``path`` and the bytes it needs."""
+    replace_file(path, data.encode() if isinstance(data, str) else data, sync=False)
+    return path
+
+
+def _saved(figure: Any, fmt: str) -> bytes:
+    """A matplotlib figure saved in format ``fmt``, in memory."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=fmt, dpi=DPI, **({"pil_kwargs": FAST_PNG} if fmt == "png" else {}))
+    return buffer.getvalue()
+
+
 def _render(job: tuple[ReportFigure, Path, str]) -> str:
-    """Draw one figure and save it as ``path`` in format ``fmt`` -> the ``<img>`` embedding it
-    (a PNG rendering for PDF: browsers do not show a PDF in an image)."""
+    """Draw one figure and save it as ``path`` in format ``fmt`` (:func:`write_whole`) -> the ``<img>`` embedding
+    it (a PNG rendering for PDF: browsers do not show a PDF in an image)."""
     report_figure, path, fmt = job
     figure = report_figure.draw()
-    figure.savefig(path, format=fmt, dpi=DPI, **({"pil_kwargs": FAST_PNG} if fmt == "png" else {}))
+    data = _saved(figure, fmt)
+    write_whole(path, data)
     if fmt == "pdf":
-        buffer = io.BytesIO()
-        figure.savefig(buffer, format="png", dpi=DPI, pil_kwargs=FAST_PNG)
-        data, mime = buffer.getvalue(), MIME["png"]
-    else:
-        data, mime = path.read_bytes(), MIME[fmt]
-    return f'<img alt="{html.escape(report_figure.title)}" src="data:{mime};base64,{base64.b64encode(data).decode()}">'
+        data, fmt = _saved(figure, "png"), "png"
+    source = f"data:{MIME[fmt]};base64,{base64.b64encode(data).decode()}"
+    return f'<img alt="{html.escape(report_figure.title)}" src="{source}">'
 
 
 CSV_ONLY = ("runs", "bias_evaluations", "per_seed")  # tables too long to read as markdown
@@ -241,11 +254,10 @@ def _write_tables(tables: dict[str, pd.DataFrame], folder: Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name, table in tables.items():
-        table.to_csv(folder / f"{name}.csv", index=False, float_format=None if name in EXACT else "%.6g")
-        written.append(folder / f"{name}.csv")
+        csv = table.to_csv(index=False, float_format=None if name in EXACT else "%.6g")
+        written.append(write_whole(folder / f"{name}.csv", csv))
         if name not in CSV_ONLY:
-            (folder / f"{name}.md").write_text(markdown_table(table), encoding="utf-8")
-            written.append(folder / f"{name}.md")
+            written.append(write_whole(folder / f"{name}.md", markdown_table(table)))
     return written
 
 
@@ -253,9 +265,8 @@ def _write_studies(studies: Studies, folder: Path) -> list[Path]:
     """Each study's best trials as ``<stem>_best_trials.csv`` and ``.md``."""
     written = []
     for stem, study in studies.read.items():
-        study.best.to_csv(folder / f"{stem}_best_trials.csv", index=False)
-        (folder / f"{stem}_best_trials.md").write_text(study.best_markdown(), encoding="utf-8")
-        written += [folder / f"{stem}_best_trials.csv", folder / f"{stem}_best_trials.md"]
+        written += [write_whole(folder / f"{stem}_best_trials.csv", study.best.to_csv(index=False)),
+                    write_whole(folder / f"{stem}_best_trials.md", study.best_markdown())]
     return written
 
 
@@ -424,7 +435,7 @@ def _copy_animations(analysis: Analysis, folder: Path, figures: Path) -> dict[st
         (figures / ANIMATIONS).mkdir(parents=True, exist_ok=True)
         names = [file_name(index, item) for index, item in enumerate(items)]
         for item, name in zip(items, names):
-            shutil.copyfile(item.source, figures / ANIMATIONS / name)
+            write_whole(figures / ANIMATIONS / name, item.source.read_bytes())
         blocks[task] = animations_html(task, items, [f"{figures.name}/{ANIMATIONS}/{name}" for name in names])
     return blocks
 
@@ -561,8 +572,8 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
     index = out / "index.html"
     animations = _copy_animations(analysis, folder, out / "figures")
     _remove_stale(out, [*paths, *written])  # before the page: its title says whether an earlier report was here
-    index.write_text(_html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
-                                animations, critic_tests, claims, tables["runs_provenance"]), encoding="utf-8")
+    write_whole(index, _html_page(folder, table, analysis, list(zip(figures, images)), studies, images[len(figures):],
+                                  animations, critic_tests, claims, tables["runs_provenance"]))
     timings["writing"] = time.perf_counter() - start
     return ReportResult(index=index, figures=paths, tables=written, timings=timings)
 
@@ -635,11 +646,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ReportInputError as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
-    except OSError as err:  # a full disk: one line (the report's files are rewritten whole by the next report)
+    except (DiskFullError, OSError) as err:  # a full disk: one line naming the file and the bytes it needs
         if not full_disk(err):
             raise
-        out = err.filename or (args.out if args.out is not None else args.folder / "report")
-        print(f"hersd-report: error: {DiskFullError(out, None, 'free some and run hersd-report again')}",
+        if not isinstance(err, DiskFullError):  # a folder it could not make: one block of its device
+            path = Path(err.filename or (args.out if args.out is not None else args.folder / "report"))
+            err = DiskFullError(path, block_bytes(path))
+        print(f"hersd-report: error: {DiskFullError(err.path, err.needed, 'free some and run hersd-report again')}",
               file=sys.stderr)
         return 2
     timings = result.timings

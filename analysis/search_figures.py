@@ -20,6 +20,7 @@ study it finds). Needs optuna, pandas and matplotlib, not torch or MuJoCo.
 
 from __future__ import annotations
 
+import io
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +44,8 @@ from optuna.trial import FrozenTrial, TrialState  # noqa: E402
 
 from analysis.figures import LEGEND_SIZE, PANEL_SIZE, wrap  # noqa: E402
 from analysis.tables import markdown_table  # noqa: E402
-from hersd.contract.errors import ConfigError  # noqa: E402
+from hersd.contract.errors import ConfigError, DiskFullError  # noqa: E402
+from hersd.contract.runlog import replace_file  # noqa: E402
 from hersd.contract.schedules import MU_EPS_BAND, known_kinds, mean_rate_approx, schedule_class  # noqa: E402
 from analysis.studies import open_study_storage  # noqa: E402
 from hersd.contract.study import (KIND_ATTR, PAPER_SETTINGS, PARAM_NAMES, REWARD_PARAM, RETRY_OF_ATTR,  # noqa: E402
@@ -383,13 +385,14 @@ def study_figures(storage_url_or_db_path: str | Path, out_dir: str | Path, study
     written: list[Path] = []
     for name in [study_name] if study_name is not None else opened.study_names:
         study = read_study(opened.storage, name, top)
-        figure_path = out_dir / f"{name}_{study.figure_name}.png"
-        study.figure().savefig(figure_path, dpi=150)
-        csv_path = out_dir / f"{name}_best_trials.csv"
-        study.best.to_csv(csv_path, index=False)
-        md_path = out_dir / f"{name}_best_trials.md"
-        md_path.write_text(study.best_markdown(), encoding="utf-8")
-        written += [figure_path, csv_path, md_path]
+        figure = io.BytesIO()
+        study.figure().savefig(figure, format="png", dpi=150)
+        files = {f"{name}_{study.figure_name}.png": figure.getvalue(),
+                 f"{name}_best_trials.csv": study.best.to_csv(index=False).encode(),
+                 f"{name}_best_trials.md": study.best_markdown().encode()}
+        for file, data in files.items():  # each whole; a full disk: DiskFullError, the file and the bytes it needs
+            replace_file(out_dir / file, data, sync=False)
+            written.append(out_dir / file)
     return written
 
 
@@ -404,7 +407,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         paths = study_figures(args.storage, args.out_dir, study_name=args.study)
-    except StudyStorageError as err:
+    except (StudyStorageError, DiskFullError) as err:  # one line: a storage it cannot read, a full disk
         print(f"error: {err}", file=sys.stderr)
         return 2
     print("\n".join(str(path) for path in paths))

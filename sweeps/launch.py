@@ -54,17 +54,12 @@ def concurrent_runs(launcher: DictConfig, n_runs: int) -> int | None:
     return 1
 
 
-def with_threads(job: list[str], threads: int) -> list[str]:
-    """A job's overrides with ``threads=<threads>`` unless it sets threads itself."""
-    return job if any(o.split("=", 1)[0].lstrip("+") == "threads" for o in job) else [*job, f"threads={threads}"]
-
-
 # --------------------------------------------------------------------------- in the sweeping process
 def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     """Expand, check, list (dry run) or launch the grid; print a summary; raise if any run failed."""
     from hersd.contract.runstore import RunFolder, check_writable
     from sweeps.launchers import check_launcher, watched_by_jobs
-    from sweeps.plan import SweepConfig, SweepError, plan_runs, trainable_here
+    from sweeps.plan import SweepConfig, SweepError, launched, plan_runs, save_specs, trainable_here
 
     global _composed
     _composed = True
@@ -87,21 +82,21 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         list_runs(planned, at_once)
         return []
 
-    to_launch = [run.job for directory, run in planned.items() if states[directory] != "complete"]
-    if not to_launch:
+    runs = [run for directory, run in planned.items() if states[directory] != "complete"]
+    if not runs:
         return []
-    threads = auto_threads(sweeper.config.hydra.launcher, len(to_launch)) if sweep_threads == "auto" else None
-    if threads is not None:
-        to_launch = [with_threads(job, threads) for job in to_launch]
+    threads = auto_threads(sweeper.config.hydra.launcher, len(runs)) if sweep_threads == "auto" else None
+    specs = dict(launched(run, threads) for run in runs)
+    to_launch = [list(job) for job in specs]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
     try:  # below results_dir, like every run's folder
         check_writable(sweep_dir)
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
+    save_specs(sweep_dir, specs)
     (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
-    if at_once is not None:  # they train here: each job process ends with this one (sweeps.launchers)
-        watched_by_jobs(sweeper.launcher, len(to_launch))
-    results = launch_jobs(sweeper, to_launch)
+    with watched_by_jobs(sweeper.launcher, len(to_launch), here=at_once is not None):  # jobs here end with this
+        results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])
     return [results]
 
@@ -164,7 +159,7 @@ def report_outcomes(jobs: list[list[str]], results: list, skipped: int) -> None:
     from sweeps.hydra_private import job_error
     from sweeps.plan import SweepError
 
-    outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": []}
+    outcomes: dict[str, list[str]] = {"done": [], "resumed": [], "busy": [], "failed": [], "full_disk": []}
     for job, result in zip(jobs, results):
         if result.status == JobStatus.FAILED:
             outcomes["failed"].append(f"[{' '.join(job)}]: {job_error(result)}")
@@ -172,11 +167,14 @@ def report_outcomes(jobs: list[list[str]], results: list, skipped: int) -> None:
             outcome = result.return_value
             detail = outcome["run_dir"] + (f" (see {outcome['error_log']})" if outcome.get("error_log") else "")
             outcomes[outcome["status"]].append(detail)
+            outcomes["full_disk"] += [outcome["full_disk"]] if "full_disk" in outcome else []
     print(f"sweep finished: {len(outcomes['done'])} done, {skipped} skipped (complete), "
           f"{len(outcomes['resumed'])} resumed, {len(outcomes['busy'])} running elsewhere, "
           f"{len(outcomes['failed'])} failed", flush=True)
     for line in outcomes["failed"]:
         print(f"  failed: {line}", flush=True)
+    if outcomes["full_disk"]:  # a failed run whose error.log found no space (sweeps.status.failed_outcome)
+        raise SweepError(outcomes["full_disk"][0], exit_code=2)
     if outcomes["failed"]:
         raise SweepError(f"{len(outcomes['failed'])} run(s) failed; fix the cause and run the same command "
                          f"again (finished runs are kept and skipped)", exit_code=1)
@@ -187,38 +185,35 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
     """Train one run of the sweep; never raises, so one failure does not stop the others."""
     from hydra.core.hydra_config import HydraConfig
 
-    from hersd.contract.runstore import ERROR_NAME, RunFolder, RunLockedError, run_dir
+    from hersd.contract.runstore import RunFolder, RunLockedError
     from hersd.engine.train import train
     from sweeps.launchers import end_with_sweep
-    from sweeps.plan import job_train_config
+    from sweeps.plan import job_spec
+    from sweeps.status import failed_outcome
 
     end_with_sweep()
     hydra_cfg = HydraConfig.get()
-    train_cfg = job_train_config(cfg)
-    directory = run_dir(train_cfg)
+    spec = job_spec(cfg, Path(hydra_cfg.sweep.dir), list(hydra_cfg.overrides.task))
+    directory = spec.folder
     state = RunFolder(directory).state()
     outcome: dict[str, Any] = {"run_dir": str(directory)}
     tic = time.time()
     try:
-        train(train_cfg, command=" ".join(["hersd-sweep", *hydra_cfg.overrides.task]))
+        train(spec, command=" ".join(["hersd-sweep", *hydra_cfg.overrides.task]))
         outcome["status"] = "resumed" if state == "resumable" else "done"
     except RunLockedError:
         outcome["status"] = "busy"
     except Exception:  # noqa: BLE001 - any failure is this run's alone; it is reported, the sweep goes on
-        error_log = directory / ERROR_NAME
-        error_log.parent.mkdir(parents=True, exist_ok=True)
-        error_log.write_text(traceback.format_exc())
-        outcome.update(status="failed", error_log=str(error_log))
+        outcome.update(failed_outcome(directory, traceback.format_exc()))  # its error.log; a full disk: one line
     _report_progress(Path(hydra_cfg.sweep.dir), outcome, time.time() - tic)
     return outcome
 
 
 def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -> None:
     """Append this run's outcome to the sweep's progress file and print runs done / total and ETA."""
-    line = json.dumps({**outcome, "seconds": seconds}) + "\n"
-    with open(sweep_dir / PROGRESS_NAME, "a") as progress:
-        progress.write(line)
-    finished = len((sweep_dir / PROGRESS_NAME).read_text().splitlines())
+    from sweeps.status import record_progress
+
+    finished = record_progress(sweep_dir / PROGRESS_NAME, {**outcome, "seconds": seconds})  # full disk: left out
     plan_path = sweep_dir / PLAN_NAME
     plan = json.loads(plan_path.read_text()) if plan_path.exists() else {"runs": finished, "start": time.time()}
     elapsed = time.time() - plan["start"]

@@ -3,14 +3,15 @@ launcher (:func:`check_launcher`, from :mod:`sweeps.launch`) and ``hersd-search`
 (:func:`check_slurm`, from :mod:`sweeps.search.workers`). SLURM is asked (``sinfo``) the same way for both, and a
 bad setting is one line naming it: exit 2, before any run or job.
 
-The lifetime of a sweep's local workers: a sweep whose jobs train on this machine names its main process to them
-(:func:`watched_by_jobs`), and each job process ends within a second of that process, however it ends (``kill -9``
+The lifetime of local workers, ``hersd-sweep``'s and ``hersd-search``'s alike: a command whose workers train on this
+machine names its main process to them (:func:`main_process`; a sweep through :func:`watched_by_jobs`, a search as
+its workers' argument), and each worker ends within a second of that process, however it ends (``kill -9``
 included: no signal reaches a worker then, and joblib's loky workers would otherwise train on and idle for minutes,
-holding their runs' locks, so a re-run would find them "running elsewhere"). Each job polls it
-(:func:`end_with_sweep`) rather than asking the kernel for a signal at its parent's death (``PR_SET_PDEATHSIG``):
-that signal follows the parent *thread* that started the worker, is Linux-only, and submitit's local jobs are
-grandchildren. Once the workers are gone, the resource trackers they share with the main process see their pipes
-close and end too. SLURM jobs (their own allocation, another machine) are never watched.
+holding their runs' locks, so a re-run would find them "running elsewhere"). Each worker polls it (:func:`end_with`;
+a sweep's jobs through :func:`end_with_sweep`) rather than asking the kernel for a signal at its parent's death
+(``PR_SET_PDEATHSIG``): that signal follows the parent *thread* that started the worker, is Linux-only, and
+submitit's local jobs are grandchildren. Once the workers are gone, the resource trackers they share with the main
+process see their pipes close and end too. SLURM jobs (their own allocation, another machine) are never watched.
 """
 
 from __future__ import annotations
@@ -19,8 +20,9 @@ import os
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 from omegaconf import DictConfig
 
@@ -83,8 +85,8 @@ def check_launcher(launcher: DictConfig, submits: bool = True) -> None:
 
 
 SWEEP_ENV = "HERSD_SWEEP_PROCESS"  # "<pid>:<start time>" of the sweep's main process, for its local jobs
-POLL_SECONDS = 0.5  # how often a job looks for the sweep's main process
-_watching: list[str] = []  # the process this job process watches (once per process: loky reuses its workers)
+POLL_SECONDS = 0.5  # how often a worker looks for its command's main process
+_watching: list[str] = []  # the process this worker process watches (once per process: loky reuses its workers)
 
 
 def process_start(pid: int) -> str:
@@ -112,33 +114,58 @@ def alive(pid: int, start: str) -> bool:
     return True
 
 
-def watched_by_jobs(launcher: Any, jobs: int) -> None:
-    """In a sweep's main process, before its ``jobs`` start on this machine: name this process to them
-    (:data:`SWEEP_ENV`, inherited by the processes the launcher starts), and start no more joblib workers than
-    jobs (:func:`sweeps.hydra_private.cap_local_workers`: a worker without a job would never watch)."""
+def main_process() -> str:
+    """This process as its workers watch it (:func:`end_with`): ``"<pid>:<start time>"``."""
+    return f"{os.getpid()}:{process_start(os.getpid())}"
+
+
+@contextmanager
+def watched_by_jobs(launcher: Any, jobs: int, here: bool = True) -> Iterator[None]:
+    """In a sweep's main process, around the launch of its ``jobs``, if they train on this machine (``here``): name
+    this process to them (:data:`SWEEP_ENV`, inherited by the processes the launcher starts; as it was afterwards),
+    and start no more joblib workers than jobs (:func:`sweeps.hydra_private.cap_local_workers`: a worker without a
+    job would never watch)."""
+    if not here:
+        yield
+        return
     cap_local_workers(launcher, jobs)
-    os.environ[SWEEP_ENV] = f"{os.getpid()}:{process_start(os.getpid())}"
+    before = os.environ.get(SWEEP_ENV)
+    os.environ[SWEEP_ENV] = main_process()
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(SWEEP_ENV, None)
+        else:
+            os.environ[SWEEP_ENV] = before
 
 
 def end_with_sweep() -> None:
-    """In a job process of a sweep that trains here (:data:`SWEEP_ENV` set): a daemon thread that ends this
-    process (one line on stderr) within :data:`POLL_SECONDS` of the sweep's main process; once per process. Its
-    run keeps what its log and checkpoint hold (both written atomically): a re-run of the sweep resumes it."""
-    named = os.environ.get(SWEEP_ENV)
-    if not named or _watching == [named]:
+    """In a job process of a sweep that trains here (:data:`SWEEP_ENV` set): :func:`end_with` the sweep's main
+    process. Its run keeps what its log and checkpoint hold (both written atomically): a re-run resumes it."""
+    if named := os.environ.get(SWEEP_ENV):
+        end_with(named, "hersd-sweep", "its run resumes when the same command runs again")
+
+
+def end_with(named: str, command: str, then: str) -> None:
+    """In a worker process of ``command`` whose main process is ``named`` (:func:`main_process`): a daemon thread
+    that ends this process within :data:`POLL_SECONDS` of that one, with one line on stderr (``then``: what becomes
+    of its work); once per process, and never where the main process is this one."""
+    if _watching == [named]:
         return
     _watching[:] = [named]
     pid, _, start = named.partition(":")
-    if int(pid) == os.getpid():  # a launcher that runs the jobs in the sweep's own process
+    if int(pid) == os.getpid():  # a launcher that runs the jobs in the command's own process
         return
-    threading.Thread(target=_end_after, args=(int(pid), start), daemon=True, name="hersd-sweep-watch").start()
+    threading.Thread(target=_end_after, args=(int(pid), start, command, then), daemon=True,
+                     name=f"{command}-watch").start()
 
 
-def _end_after(pid: int, start: str) -> None:
+def _end_after(pid: int, start: str, command: str, then: str) -> None:
     while alive(pid, start):
         time.sleep(POLL_SECONDS)
     try:
-        print(f"hersd-sweep: the sweep's main process (pid {pid}) is gone; its worker {os.getpid()} ends with it "
-              "(its run resumes when the same command runs again)", file=sys.stderr, flush=True)
+        print(f"{command}: its main process (pid {pid}) is gone; its worker {os.getpid()} ends with it ({then})",
+              file=sys.stderr, flush=True)
     finally:
         os._exit(1)

@@ -31,7 +31,8 @@ the 300 runs of ``+grid=beta`` need 3 compositions, not 300.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, fields
+import pickle
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +45,7 @@ from hersd.contract.compose import (explain_config_error, null_group, open_sched
 from hersd.contract.config import TrainConfig, to_train_config
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import available_cores
-from hersd.contract.runstore import run_dir
+from hersd.contract.runspec import RunSpec, resolve
 from sweeps.hydra_private import apply_value_overrides, basic_sweeper_class, group_test, grid_overrides
 
 
@@ -63,6 +64,10 @@ class SweepConfig(TrainConfig):
             raise ConfigError(f"seeds must be >= 1, got {seeds}")
 
 
+SWEEP_ONLY_KEYS = ("hydra", "seeds")  # a sweep's config keys that are no setting of its runs
+SPECS_NAME = "specs.pkl"  # in the sweep's folder: its jobs' resolved runs (save_specs)
+
+
 class SweepError(RuntimeError):
     """A sweep cannot start (bad input, e.g. a run's config is invalid: exit code 2) or ended
     with failed runs (exit code 1)."""
@@ -75,8 +80,16 @@ class SweepError(RuntimeError):
 @dataclass(frozen=True)
 class PlannedRun:
     job: list[str]  # the run's overrides: ``hersd-sweep <job>`` is the one-run sweep of it
-    epochs: int
-    machine: tuple[str, str]  # (device, precision): what it asks of the machine that trains it
+    spec: RunSpec  # the run, resolved once (hersd.contract.runspec)
+
+    @property
+    def epochs(self) -> int:
+        return self.spec.config.epochs
+
+    @property
+    def machine(self) -> tuple[str, str]:
+        """(device, precision): what it asks of the machine that trains it."""
+        return self.spec.machine
 
 
 def register_schemas() -> None:
@@ -91,13 +104,34 @@ OmegaConf.register_new_resolver("hersd_cores", available_cores, replace=True)
 
 
 def job_train_config(cfg: DictConfig) -> TrainConfig:
-    """A composed sweep job config (with or without its ``hydra`` node) -> its TrainConfig."""
-    if "hydra" in cfg:
-        cfg = cfg.copy()
-        with open_dict(cfg):
-            del cfg["hydra"]
-    sweep_cfg = to_train_config(cfg)
-    return TrainConfig(**{f.name: getattr(sweep_cfg, f.name) for f in fields(TrainConfig)})
+    """A composed sweep job config (with or without its ``hydra`` node) -> its TrainConfig, validated once (the
+    sweep's own keys, ``seeds`` and ``hydra``, left out)."""
+    values = OmegaConf.to_container(cfg, resolve=True)
+    for key in SWEEP_ONLY_KEYS:
+        values.pop(key, None)
+    return to_train_config(OmegaConf.merge(OmegaConf.structured(TrainConfig), values))
+
+
+def launched(run: PlannedRun, threads: int | None) -> tuple[tuple[str, ...], RunSpec]:
+    """(its job's overrides, its spec) of a run as launched: with ``threads=<threads>`` (a share of the cores,
+    logged, not part of its identity) unless ``threads`` is None or its job sets threads itself."""
+    if threads is None or any(override.split("=", 1)[0].lstrip("+") == "threads" for override in run.job):
+        return tuple(run.job), run.spec
+    return (*run.job, f"threads={threads}"), run.spec.with_threads(threads)
+
+
+def save_specs(sweep_dir: Path, specs: dict[tuple[str, ...], RunSpec]) -> None:
+    """The resolved runs of a sweep's jobs (job overrides -> spec), for the jobs to take (:func:`job_spec`)."""
+    (sweep_dir / SPECS_NAME).write_bytes(pickle.dumps(specs))
+
+
+def job_spec(cfg: DictConfig, sweep_dir: Path, job: list[str]) -> RunSpec:
+    """A sweep job's run as its sweep resolved it (:func:`save_specs`): nothing resolved again; a job launched
+    without one (the file gone) resolves its composed ``cfg``."""
+    try:
+        return pickle.loads((sweep_dir / SPECS_NAME).read_bytes())[tuple(job)]
+    except (OSError, KeyError):
+        return resolve(job_train_config(cfg))
 
 
 def grid_stages(params: Any) -> list[list[dict[str, str]]]:
@@ -212,12 +246,11 @@ def plan_runs(sweeper: Any, arguments: list[str]) -> dict[Path, PlannedRun]:
     planned: dict[Path, PlannedRun] = {}
     for job in jobs:
         try:
-            train_cfg = job_train_config(configs.config(job))
-            if train_cfg.run_dir is not None and len(jobs) > 1:  # each run would be planned into the first's folder
-                raise SweepError(f"run_dir={train_cfg.run_dir} would put the sweep's {len(jobs)} runs in one folder; "
+            spec = resolve(job_train_config(configs.config(job)))
+            if spec.config.run_dir is not None and len(jobs) > 1:  # each run would be planned into the first's folder
+                raise SweepError(f"run_dir={spec.config.run_dir} would put the sweep's {len(jobs)} runs in one folder; "
                                  "leave it out: each run gets its own under results_dir", exit_code=2)
-            planned.setdefault(run_dir(train_cfg),
-                               PlannedRun(job, train_cfg.epochs, (train_cfg.device, train_cfg.precision)))
+            planned.setdefault(spec.folder, PlannedRun(job, spec))
         except (ConfigError, HydraException, OmegaConfBaseException) as err:  # e.g. a swept value no config names
             said = explain_config_error(err, what="sweep setting", see="hersd-sweep --help")
             raise SweepError(f"run [{' '.join(job)}]: {said}", exit_code=2) from None

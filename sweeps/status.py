@@ -12,17 +12,23 @@ store's files only (its log, checkpoint and lock file), so it works while runs a
 Runs started by hersd before lock files recorded pids show as ``resumable`` while they train;
 the age of their last epoch tells the two apart. A run with logged epochs also shows how it learns: its
 mean test success over its last RECENT_EPOCHS. :func:`time_to_go` sums what the listed runs have left.
+
+A sweep's job records how its run ended: a failed run's ``error.log`` (:func:`failed_outcome`) and a line in the
+sweep's progress file (:func:`record_progress`), neither of which a full disk turns into a traceback.
 """
 
 from __future__ import annotations
 
+import json
+import re
 import statistics
 import time
 from pathlib import Path
 from typing import NamedTuple, Sequence
 
-from hersd.contract.runlog import RunLogError
-from hersd.contract.runstore import RunFolder
+from hersd.contract.errors import DiskFullError, full_disk
+from hersd.contract.runlog import RunLogError, replace_file
+from hersd.contract.runstore import ERROR_NAME, RunFolder, error_line
 
 PACE_EPOCHS = 5  # a run's pace: the mean time of its last this many epochs
 RECENT_EPOCHS = 10  # how a run learns at a glance: its mean test success over its last this many epochs
@@ -110,3 +116,36 @@ def time_to_go(statuses: Sequence[RunStatus], at_once: int | None) -> str | None
         line += (f", ~{ago(epochs * pace / at_once)} at {at_once} run{'s' * (at_once > 1)} at once and {pace:.0f} s "
                  "per epoch (the median pace of the runs training now)")
     return line
+
+
+def failed_outcome(directory: Path, error: str) -> dict[str, str]:
+    """How a sweep's job records its run stopped by ``error`` (a traceback): ``error.log`` in the run's folder,
+    written whole (:func:`hersd.contract.runlog.replace_file`: never a temporary or half-written file) ->
+    ``{"status": "failed", "error_log": <its path>}``. On a full disk, where the error log cannot be written either,
+    ``{"status": "failed", "full_disk": <one line>}``: the error log, the bytes it needs and the run's error, which the
+    sweep ends with (exit 2). Any other error writing it is raised."""
+    path, data = directory / ERROR_NAME, error.encode()
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        replace_file(path, data)
+    except (OSError, DiskFullError) as err:
+        if not full_disk(err):
+            raise
+        stopped = re.sub(r"^(\w+\.)+(?=\w+(:|$))", "", error_line(error))  # DiskFullError, not hersd.contract....
+        then = (f"the run stopped with {stopped}; free some and run the same command again (finished runs are kept "
+                "and skipped, the others resume)")
+        return {"status": "failed", "full_disk": str(DiskFullError(path, len(data), then))}
+    return {"status": "failed", "error_log": str(path)}
+
+
+def record_progress(path: Path, outcome: dict) -> int:
+    """Append ``outcome`` to the sweep's progress file ``path`` (one JSON line, one write) -> the runs it records,
+    this one included. On a full disk the line is left out (the outcome still reaches the sweep's summary)."""
+    try:
+        with open(path, "a") as progress:
+            progress.write(json.dumps(outcome) + "\n")
+    except OSError as err:
+        if not full_disk(err):
+            raise
+        return len(path.read_bytes().splitlines()) + 1 if path.exists() else 1
+    return len(path.read_bytes().splitlines())

@@ -103,3 +103,72 @@ def train_killed_at_epoch(args: list[str], epoch: int = 2) -> None:
             break
     proc.wait()
     assert proc.returncode == -signal.SIGKILL
+
+
+def full_disk_writes(monkeypatch, pattern: str) -> None:
+    """Every file opened for writing whose name matches ``pattern`` fails as on a full disk: it is created, its
+    first bytes written, then ENOSPC (``open`` and ``io.open`` replaced: whatever writes it, hersd or a library)."""
+    import builtins
+    import errno
+    import io
+
+    real_open = builtins.open
+
+    class Full:
+        def __init__(self, stream) -> None:
+            self.stream = stream
+
+        def __enter__(self) -> "Full":
+            return self
+
+        def __exit__(self, *exc_info) -> None:
+            self.stream.close()
+
+        def __getattr__(self, name: str):
+            return getattr(self.stream, name)
+
+        def write(self, data) -> int:
+            self.stream.write(data[:16])
+            self.stream.flush()
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    def full_open(file, mode="r", *args, **kwargs):
+        stream = real_open(file, mode, *args, **kwargs)
+        named = isinstance(file, (str, os.PathLike)) and Path(file).match(pattern)
+        return Full(stream) if named and set(mode) & set("wax+") else stream
+
+    monkeypatch.setattr(builtins, "open", full_open)
+    monkeypatch.setattr(io, "open", full_open)
+
+
+def group_alive(group: int, seconds: float = 10.0) -> bool:
+    """Whether processes of the process group ``group`` are still running after ``seconds``."""
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(group, 0)
+        except ProcessLookupError:
+            return False
+        time.sleep(0.1)
+    return True
+
+
+def killed_while_training(command: list[str], folder: Path, stderr: Path | None = None) -> int:
+    """Start ``command`` (a sweep or search of two runs at once, in a session of its own, stderr into the file
+    ``stderr`` if given), SIGKILL its main process alone once both runs under ``folder`` train (each has a
+    checkpoint), and check that every process it started is gone within 5 s -> its pid (its process group)."""
+    import signal
+    import time
+
+    with open(stderr or os.devnull, "w") as err:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while len(list(folder.rglob("checkpoint.pt"))) < 2 and time.monotonic() < deadline:  # both runs training
+        time.sleep(0.2)
+    assert proc.poll() is None
+    os.kill(proc.pid, signal.SIGKILL)  # no signal reaches its workers
+    proc.wait()
+    assert not group_alive(proc.pid, seconds=5)  # the workers and the resource trackers are gone
+    return proc.pid

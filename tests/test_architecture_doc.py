@@ -17,7 +17,8 @@ import pandas as pd
 import pytest
 
 import hersd
-from hersd.contract.config import PACKAGE_LEARNERS
+from hersd.contract.config import FAST_UPDATE_LEARNERS, PACKAGE_LEARNERS
+from hersd.contract.learners import package_cards
 from hersd.contract.schedules import Schedule
 from hersd.contract.schedules.base import CHECKED_UP_FRONT, ScheduleRateError, check_rates
 
@@ -33,9 +34,13 @@ def in_fresh_interpreter(code: str) -> str:
 
 
 def test_a_learner_of_the_contracts_table_loads_no_engine_and_another_name_does():
-    """``learner.name=td3`` is in PACKAGE_LEARNERS, whose names the doc lists: no torch; a name outside the table
-    and not registered loads the packages of hersd.learner_modules (the engine's learners, torch) before it is
-    refused."""
+    """PACKAGE_LEARNERS and FAST_UPDATE_LEARNERS are read from the learners' cards, as the doc says, and it lists
+    their names; ``learner.name=td3`` is among them: no torch; a name outside the table and not registered loads
+    the packages of hersd.learner_modules (the engine's learners, torch) before it is refused."""
+    assert PACKAGE_LEARNERS == {name: card.settings for name, card in package_cards().items()}
+    assert FAST_UPDATE_LEARNERS == tuple(name for name, card in package_cards().items() if card.fast_update)
+    assert ("the contract's tables of them (`PACKAGE_LEARNERS`, `FAST_UPDATE_LEARNERS` in `hersd/contract/config.py`) "
+            "are read from the cards") in DOC
     names = ", ".join(f"`{name}`" for name in PACKAGE_LEARNERS)
     assert f"(`PACKAGE_LEARNERS` in `config.py`: {names}, whose settings it knows without the engine" in DOC
     assert in_fresh_interpreter("""import sys
@@ -59,13 +64,14 @@ class LateBad(Schedule):
         return 2.0 if k >= self.bad_from else 0.5
 
 
-def test_a_fixed_schedules_first_checked_up_front_epochs_are_checked_when_its_config_is_built():
+def test_a_fixed_schedules_first_checked_up_front_epochs_are_checked_when_its_run_is_resolved():
     assert f"for each of its first {CHECKED_UP_FRONT:,} epochs (`CHECKED_UP_FRONT` in `base.py`" in DOC
     LateBad.bad_from = CHECKED_UP_FRONT
     with pytest.raises(ScheduleRateError):
         check_rates(LateBad(), CHECKED_UP_FRONT + 1)
     LateBad.bad_from = CHECKED_UP_FRONT + 1
-    check_rates(LateBad(), CHECKED_UP_FRONT + 1)  # a later epoch's rate is checked when training reaches it
+    rates = check_rates(LateBad(), CHECKED_UP_FRONT + 1)  # a later epoch's rate is checked when training reaches it
+    assert len(rates) == CHECKED_UP_FRONT and set(rates) == {0.5}
 
 
 def test_the_bias_evaluations_cost_is_the_committed_reports():
@@ -93,36 +99,34 @@ def test_figures_py_computes_none_of_what_it_draws():
         assert f"`{module.__name__.split('.')[-1]}.py` (" in DOC and f"`{name}`" in DOC
 
 
-@pytest.mark.parametrize("done_before", [0, 2])
-def test_a_search_seed_reads_its_log_where_it_resumes_and_once_after_its_run(monkeypatch, tmp_path, done_before):
-    """A new run: its log read once, after it; a run resumed after ``done_before`` epochs: once more, at its
-    first epoch (the epochs before it)."""
+@pytest.mark.parametrize("done_before", [0, 2, 4])
+def test_a_search_seed_reads_no_log_new_resumed_or_complete(monkeypatch, tmp_path, done_before):
+    """A new run, one resumed after 2 epochs, one found complete: the epochs the log holds reach the objective from
+    training (``on_logged``), the others from the per-epoch callback; the objective reads no log."""
     import hersd.engine.train
+    from hersd.contract import runlog
     from sweeps.search import objective
 
     records = [{"epoch": epoch, "test_success": epoch / 4} for epoch in (1, 2, 3, 4)]
     reads = []
 
-    def read_records(path):
-        reads.append(path)
-        return SimpleNamespace(records=records)
-
-    def train(cfg, command, on_epoch):
+    def train(spec, command, on_epoch, on_logged):
+        on_logged(records[:done_before])
         for record in records[done_before:]:
             on_epoch(record)
 
-    monkeypatch.setattr(objective, "read_records", read_records)
+    monkeypatch.setattr(runlog, "read_messages", lambda *args: reads.append(args))
     monkeypatch.setattr(hersd.engine.train, "train", train)
     trial = SimpleNamespace(number=0, set_user_attr=lambda *args: None, report=lambda *args: None,
                             should_prune=lambda: False)
     plan = SimpleNamespace(search=SimpleNamespace(metric="test_success", seeds=1), epochs=4, train_overrides=[],
                            study_name="study", base=SimpleNamespace(threads="1"))
     progress = objective.TrialProgress(trial, "final", 4)
-    cfg = SimpleNamespace(run_dir=str(tmp_path), seed=0, threads=1)
-    objective.train_seed(trial, plan, progress, {"kind": "linear", "beta1": 0.5}, cfg, 0)
-    assert len(reads) == (2 if done_before else 1) and progress.value() == 1.0
-    assert ("reads the run's log where a run resumes (the epochs before it); after each seed's run the objective "
-            "reads the log's metric once more, whole") in DOC
+    spec = SimpleNamespace(folder=tmp_path, config=SimpleNamespace(seed=0, threads=1))
+    objective.train_seed(trial, plan, progress, {"kind": "linear", "beta1": 0.5}, spec, 0)
+    assert reads == [] and progress.value() == 1.0
+    assert ("the epochs a resumed or complete run's log already holds reach it from training (`on_logged`, the "
+            "records training read), each new one from the per-epoch callback, so the objective reads no log") in DOC
 
 
 def test_the_loop_imports_no_command():

@@ -17,7 +17,7 @@ import hersd.engine.run_state
 import hersd.engine.train
 from hersd.engine.cli import main
 from hersd.contract.compose import compose_train
-from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, DDPGConfig, MEPConfig, SACConfig, ScheduleConfig, TaskConfig, TD3Config, TrainConfig)
+from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, DDPGConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig)
 from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import EnvSpec
 from hersd.contract.runlog import read_run
@@ -37,7 +37,8 @@ SCHEMAS = {  # the field's owner, built with one setting -> a config object
     "algo.mep": MEPConfig, "algo": AlgoConfig, "ddpg": DDPGConfig,
     "schedule": lambda **s: ScheduleConfig(kind=SCHEDULE_OF[next(iter(s))], **s),
     "schedule.mean_rate": lambda **s: ScheduleConfig(kind="linear", **s),
-    "learner.td3": TD3Config, "learner.sac": SACConfig, "bias": BiasConfig, "": _reach,
+    **{f"learner.{name}": settings for name, settings in PACKAGE_LEARNERS.items() if settings},  # their cards'
+    "bias": BiasConfig, "": _reach,
 }
 SCHEDULE_OF = {"eps": "constant", "beta1": "exponential", "beta2": "exponential", "window": "success",
                "eps_min": "success", "start": "cosine", "end": "cosine"}  # a kind with the setting
@@ -176,10 +177,10 @@ def test_hersd_train_with_an_overflowing_weight_exits_2_with_one_line_and_writes
 def test_a_run_whose_loss_turns_nan_stops_with_one_line_and_keeps_its_finished_epochs(tmp_path, capsys, monkeypatch):
     run_epoch = hersd.engine.train.run_epoch
 
-    def poisoned(state, epoch):  # from epoch 2 on, hindsight rewards of -1e308 (the bounds refuse this up front)
+    def poisoned(state, epoch, rate=None):  # from epoch 2 on, hindsight rewards of -1e308 (the bounds refuse this)
         if epoch == 2:
             state.cfg.algo.lambda_h = 1e308
-        return run_epoch(state, epoch)
+        return run_epoch(state, epoch, rate)
 
     monkeypatch.setattr(hersd.engine.train, "run_epoch", poisoned)
     monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings on the NaN actions to MUJOCO_LOG.TXT here

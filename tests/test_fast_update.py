@@ -287,8 +287,9 @@ def test_a_tiny_fast_run_trains_and_logs(tmp_path):
 
 
 def test_the_contracts_fast_learners_are_the_names_of_fast_classes_keys_and_its_refusal_lists_them():
-    """hersd.contract.config cannot import the engine: FAST_UPDATE_LEARNERS restates FAST_CLASSES, checked here;
-    the config's refusal and fast_learner_class's are one line, the same."""
+    """hersd.contract.config cannot import the engine: FAST_UPDATE_LEARNERS, read from the learners' cards
+    (``fast_update``), restates FAST_CLASSES, checked here; the config's refusal and fast_learner_class's are one
+    line, the same."""
     from hersd.contract.config import FAST_UPDATE_LEARNERS, TrainConfig
     from hersd.engine.learners import fast
 

@@ -12,7 +12,8 @@ import pytest
 import torch
 from helpers import ACTION, BATCH, batch, tiny_learner
 
-from hersd.contract.config import SACConfig, TD3Config
+from hersd.contract.learners.sac import SACConfig
+from hersd.contract.learners.td3 import TD3Config
 from hersd.contract.errors import ConfigError
 
 LEARNERS = ["td3", "sac"]

@@ -4,9 +4,11 @@ loss settings), TD3's and SAC's update rules on tiny networks, exact resume, and
 from __future__ import annotations
 
 import copy
+import json
 import pkgutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -16,6 +18,7 @@ from helpers import ACTION, BATCH, TINY, batch, metrics, tiny_learner, tiny_spec
 
 from hersd.contract.compose import compose_train
 from hersd.contract import learner_registry
+from hersd.contract import learners as cards
 from hersd.contract.config import PACKAGE_LEARNERS
 from hersd.engine import learners
 from hersd.engine.learners import LEARNERS
@@ -38,13 +41,25 @@ CHECKPOINT_LAYOUT = {
 }
 
 
-def test_every_learner_module_registers_the_class_of_its_name_that_builds_itself():
+def test_every_learner_module_registers_the_class_of_its_card_that_builds_itself():
+    """Each module of hersd/engine/learners/ (but the shared ones) has its card, the module of its name in
+    hersd/contract/learners/, whose name and settings its class takes; the config's table is the cards'."""
     modules = sorted(module.name for module in pkgutil.iter_modules(learners.__path__) if module.name not in ("base", "fast"))
-    assert modules == ["ddpg", "sac", "td3"] == sorted(PACKAGE_LEARNERS)
-    assert set(LEARNERS) == set(modules)
+    assert modules == sorted(module.name for module in pkgutil.iter_modules(cards.__path__))
+    assert modules == sorted(cards.package_cards()) == sorted(PACKAGE_LEARNERS) == sorted(LEARNERS)
     for name, cls in LEARNERS.items():
         agent = tiny_learner(name)
-        assert type(agent) is cls and cls.NAME == name and cls.LOSS_SETTINGS
+        card = cards.package_cards()[name]
+        assert type(agent) is cls and cls.NAME == name and cls.SETTINGS is card.settings and cls.LOSS_SETTINGS
+
+
+def test_a_class_bound_to_its_card_declares_neither_name_nor_settings_itself():
+    from hersd.engine.learners.ddpg import DDPG
+
+    card = cards.LearnerCard(name="twice", settings=None)
+    with pytest.raises(TypeError, match=r"^Twice takes its NAME and SETTINGS from its card \(twice\)"):
+        type("Twice", (DDPG,), {"NAME": "twice"}, card=card)
+    assert "twice" not in LEARNERS
 
 
 @pytest.mark.parametrize("name", sorted(CHECKPOINT_LAYOUT))
@@ -113,6 +128,102 @@ def test_a_class_of_the_learners_package_is_found_by_name_in_a_command_that_has_
     ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert ran.returncode == 0, ran.stderr
     assert ran.stdout.split() == ["td3", "TD3Config"]
+
+
+# A learner added to the package: its card (hersd/contract/learners/calm.py), its class (hersd/engine/learners/calm.py).
+CALM_CARD = '''
+from dataclasses import dataclass
+
+from hersd.contract.checks import SCALE_LIMIT, check_number, setting_name
+from hersd.contract.learners import LearnerCard
+
+
+@dataclass
+class CalmConfig:
+    action_l2: float = 2.0  # the actor loss's weight of mean((pi / max_u)^2), instead of ddpg.action_l2
+
+    def __post_init__(self):
+        check_number(setting_name("calm", "action_l2"), self.action_l2, 0.0, SCALE_LIMIT)
+
+
+CARD = LearnerCard(name="calm", settings=CalmConfig, fast_update=False)
+'''
+CALM_CLASS = '''
+import dataclasses
+
+from hersd.contract.learners.calm import CARD
+from hersd.engine.learners.ddpg import DDPG
+
+
+class Calm(DDPG, card=CARD):
+    LOSS_SETTINGS = "learner.calm.action_l2"
+
+    @classmethod
+    def build(cls, cfg, spec, gamma, q_range, device):
+        ddpg = dataclasses.replace(cfg.ddpg, action_l2=cfg.learner.settings.action_l2)
+        return cls(ddpg, spec, gamma, q_range, device, cfg.precision)
+'''
+# In a fresh interpreter: each package with a folder of the test's in its __path__ (as if the folder's modules lay in
+# the package's own), the contract's first; the config is composed before the engine is imported, then trained.
+WITH_CALM = '''
+import importlib.util, json, sys
+
+contract, engine, results = sys.argv[1:]
+
+
+def with_folder(package, folder):
+    spec = importlib.util.find_spec(package)
+    spec.submodule_search_locations.append(folder)
+    module = sys.modules[package] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+
+with_folder("hersd.contract.learners", contract)
+from hersd.contract.compose import compose_train
+from hersd.contract.config import FAST_UPDATE_LEARNERS, no_fast_update
+from hersd.contract.errors import ConfigError
+
+run = ["task=reach", "epochs=1", "task.cycles_per_epoch=1", "ddpg.batches_per_cycle=1", "ddpg.test_rollouts=1",
+       "ddpg.batch_size=64", "bias.epochs=[]", "render_every=0", "threads=1", "quiet=true", f"results_dir={results}",
+       "learner=calm", "learner.calm.action_l2=0.5"]
+cfg = compose_train(run)
+torch_loaded = "torch" in sys.modules
+try:
+    compose_train([*run, "update=fast"])
+except ConfigError as err:
+    refused = str(err)
+with_folder("hersd.engine.learners", engine)
+from hersd.engine.learners import learner_class
+from hersd.engine.train import train
+
+log = train(cfg)
+print(json.dumps({"torch_before_training": torch_loaded, "fast": FAST_UPDATE_LEARNERS, "refused": refused,
+                  "refusal": no_fast_update("calm"), "module": learner_class("calm").__module__, "log": str(log)}))
+'''
+
+
+def test_a_learner_added_to_the_package_is_its_class_and_its_card_and_nothing_else(tmp_path):
+    """A class file in hersd/engine/learners/ and its card in hersd/contract/learners/ (here: folders of the test's,
+    added to those packages' paths), nothing else: ``learner=calm`` composes without torch, its own settings are
+    checked and logged, update=fast is refused as its card says, and it trains FetchReach for an epoch."""
+    from hersd.contract.runlog import read_run
+
+    (tmp_path / "contract").mkdir()
+    (tmp_path / "engine").mkdir()
+    (tmp_path / "contract" / "calm.py").write_text(CALM_CARD)
+    (tmp_path / "engine" / "calm.py").write_text(CALM_CLASS)
+    ran = subprocess.run([sys.executable, "-c", WITH_CALM, str(tmp_path / "contract"), str(tmp_path / "engine"),
+                          str(tmp_path / "results")], capture_output=True, text=True, timeout=600)
+    assert ran.returncode == 0, ran.stderr[-3000:]
+    said = json.loads(ran.stdout.strip().splitlines()[-1])
+    assert not said["torch_before_training"] and said["fast"] == ["ddpg", "td3"]
+    assert said["module"] == "hersd.engine.learners.calm"
+    assert said["refused"] == said["refusal"] == ("update=fast: learner calm has no fast update (ddpg and td3 have "
+                                                  "one); use update=autograd")
+    log = read_run(said["log"])
+    assert log.complete and len(log.epochs) == 1
+    assert log.meta["config"]["learner"] == {"name": "calm", "calm": {"action_l2": 0.5}}
+    assert Path(said["log"]).parent.parent.parent.name == "calm-her"
 
 
 def test_td3_target_takes_the_minimum_of_the_twin_critics_at_smoothed_target_actions():

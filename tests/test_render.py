@@ -6,18 +6,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import errno
-
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import TINY, command, metrics
+from helpers import TINY, command, full_disk_writes, metrics
 from PIL import Image, ImageSequence
 from user_learners import LATE
 
 import hersd.engine.render
 import hersd.engine.train
 from hersd.contract.compose import compose_train
+from hersd.contract.errors import DiskFullError
+from hersd.contract.runlog import read_run
 from hersd.engine.render import RenderError, close_render_env, headless_backend, make_render_env, renders_at
 from hersd.engine.render_cli import main
 from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder, run_dir
@@ -106,32 +106,28 @@ def test_hersd_render_refuses_an_out_it_cannot_write_in_one_line(runs, tmp_path,
     assert sorted(path.name for path in tmp_path.iterdir()) == ["file"]
 
 
-def full_disk(monkeypatch) -> None:
-    """Writing a GIF fails as on a full disk, after the first bytes of its temporary file."""
-    def save(image, path, *args, **kwargs):
-        Path(path).write_bytes(b"GIF89a")
-        raise OSError(errno.ENOSPC, "No space left on device")
-
-    monkeypatch.setattr(hersd.engine.render.Image.Image, "save", save)
-
-
-def test_hersd_render_on_a_full_disk_is_one_line_naming_the_gif_and_leaves_no_file(runs, tmp_path, monkeypatch,
-                                                                                    capsys):
-    full_disk(monkeypatch)
+def test_hersd_render_on_a_full_disk_is_one_line_naming_the_gif_and_its_size_and_leaves_no_file(
+        runs, tmp_path, monkeypatch, capsys):
+    full_disk_writes(monkeypatch, "*.gif.partial")  # after the GIF's first bytes
     out = tmp_path / "full.gif"
     assert exit_code([str(runs["1"].parent), "--out", str(out)]) == 2
-    assert capsys.readouterr().err == f"hersd-render: error: cannot write {out}: No space left on device\n"
+    err = capsys.readouterr().err
+    size = runs["1"].parent.joinpath("policy", "epoch_2.gif").stat().st_size  # the same epoch's GIF, drawn in training
+    needs = str(DiskFullError(out, size)).rsplit(", ", 1)[0]  # "... of <out>: writing it needs <size>"
+    assert err.startswith(f"hersd-render: error: {needs}, ") and needs.endswith(("bytes", "KB"))
+    assert err.count("\n") == 1 and err.endswith("free; free some and run the same command again\n")
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_full_disk_while_training_renders_is_a_warning_naming_the_gif_and_leaves_no_file(tmp_path, monkeypatch,
-                                                                                           capsys):
-    full_disk(monkeypatch)
+def test_a_full_disk_while_training_renders_is_a_warning_naming_the_gif_and_its_size_and_leaves_no_file(
+        tmp_path, monkeypatch, capsys):
+    full_disk_writes(monkeypatch, "*.gif.partial")
     log = train(compose_train([*RUN, "epochs=1", "render_every=1", f"results_dir={tmp_path}"]))
     err = capsys.readouterr().err
     gif = RunFolder(log.parent).animation(1)
-    assert err.count("\n") == 1 and f"epoch 1: no policy animation: OSError: [Errno {errno.ENOSPC}] No space" in err
-    assert str(gif) in err and list(gif.parent.iterdir()) == []
+    assert err.count("\n") == 1 and f"epoch 1: no policy animation: no space left on the device of {gif}: " \
+                                     f"writing it needs " in err and " free; " in err
+    assert list(gif.parent.iterdir()) == [] and read_run(log).complete  # the run went on
 
 
 def test_a_run_stopped_while_rendering_draws_that_animation_when_resumed(runs, tmp_path, monkeypatch):

@@ -18,6 +18,7 @@ from analysis.report import main as report_main, run_state_words
 from analysis.synthetic import write_run
 
 from analysis_logs import make_config, write_campaign_midway
+from helpers import full_disk_writes
 from analysis_logs import run_tables as _tables
 
 
@@ -345,19 +346,39 @@ def test_a_folder_of_ones_own_given_as_out_keeps_its_files(sweep, tmp_path):
     assert (out / "figures" / "fig1.pdf").exists() and (out / "tables" / "notes.md").exists()
 
 
-def test_a_full_disk_while_the_report_writes_is_one_line_naming_the_folder_with_exit_2(hand_sized, tmp_path, capsys,
-                                                                                      monkeypatch):
+@pytest.mark.parametrize("name", ["tables/summary.csv", "figures/schedules.png", "index.html",
+                                  "figures"])
+def test_a_full_disk_while_the_report_writes_is_one_line_naming_the_file_and_its_size_with_exit_2(
+        hand_sized, tmp_path, capsys, monkeypatch, name):
+    """The disk fills as the report writes a table, a figure (in a worker process), its page or a folder: one line
+    naming that file and the bytes it needs (those the report writes once space is freed; a folder: one block), exit 2,
+    no temporary file left; the same command then writes the report."""
     import errno
+    import os
 
-    def full(*args, **kwargs):
-        raise OSError(errno.ENOSPC, "No space left on device")
+    from hersd.contract.errors import DiskFullError
 
-    monkeypatch.setattr(pd.DataFrame, "to_csv", full)
-    assert exit_status([str(hand_sized), "--out", str(tmp_path / "report")]) == 2
+    out = tmp_path / "report"
+    if name == "figures":  # a folder it cannot make
+        made = Path.mkdir
+
+        def full_mkdir(path, *args, **kwargs):
+            if path.name == name:
+                raise OSError(errno.ENOSPC, "No space left on device", str(path))
+            made(path, *args, **kwargs)
+
+        monkeypatch.setattr(Path, "mkdir", full_mkdir)
+    else:
+        full_disk_writes(monkeypatch, f"{Path(name).name}*")  # the file or its temporary file
+    assert exit_status([str(hand_sized), "--out", str(out)]) == 2
+    monkeypatch.undo()  # space freed
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith(f"hersd-report: error: no space left on the device of "
-                                                   f"{tmp_path / 'report'}: writing it needs more space")
-    assert err.strip().endswith("; free some and run hersd-report again")
+    assert not list(tmp_path.rglob("*.tmp"))
+    assert exit_status([str(hand_sized), "--out", str(out)]) == 0
+    size = os.statvfs(out).f_bsize if name == "figures" else (out / name).stat().st_size  # a folder: one block
+    needs = str(DiskFullError(out / name, size))
+    assert err.count("\n") == 1 and err.startswith(f"hersd-report: error: {needs.rsplit(', ', 1)[0]}, "), err
+    assert err.strip().endswith(" free; free some and run hersd-report again")
 
 
 def test_a_run_that_stopped_with_an_error_is_failed_in_the_tables_page_and_terminal(tmp_path, capsys):

@@ -12,7 +12,7 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 from searches import fails_with, load, only_db, tiny_search
-from user_schedules import MODULE, command, write_module
+from user_schedules import CRASH_MODULE, MODULE, command, write_module
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import schedule_class
@@ -165,15 +165,16 @@ def test_ranges_in_hydras_own_dict_syntax(tmp_path) -> None:
 
 def test_a_search_whose_trials_all_fail_prints_one_line_per_trial(tmp_path) -> None:
     """Each failed trial was Optuna's traceback and a "failed with value None" line (89 lines for three)."""
-    done = command("sweeps.search.cli:main", [f"search.space.kinds=[{MODULE}.Boom]", "search.n_trials=2",
-                                              "search.pruner.kind=none", "threads=1", *tiny_search(tmp_path, epochs=2)],
+    done = command("sweeps.search.cli:main", [f"search.space.kinds=[{MODULE}.KStep]", "search.n_trials=2",
+                                              f"learner._target_={CRASH_MODULE}.Crash", "search.pruner.kind=none",
+                                              "threads=1", *tiny_search(tmp_path, epochs=2)],
                    write_module(tmp_path), code=1)
     assert "Traceback" not in done.stderr, done.stderr
     for number in (0, 1):
         (line,) = [line for line in done.stderr.splitlines() if f"Trial {number} " in line]
         assert "failed with parameters" in line and "boom at epoch 2" in line
-    assert done.stderr.splitlines()[-1].startswith("hersd-search: error: every trial of this search failed; the "
-                                                   "first, trial 0: ScheduleRateRaised: ")
+    assert done.stderr.splitlines()[-1] == ("hersd-search: error: every trial of this search failed; the first, "
+                                            "trial 0: RuntimeError: boom at epoch 2")
 
 
 def test_a_field_of_a_class_made_without_param_is_one_line(draws) -> None:

@@ -9,6 +9,7 @@ import optuna
 import pandas as pd
 import pytest
 from analysis_logs import make_config
+from helpers import full_disk_writes
 from matplotlib.text import Text
 from user_schedules import MODULE, write_module
 
@@ -25,6 +26,22 @@ def test_the_search_figures_command_reports_a_bad_storage_in_one_line(storages, 
     assert search_figures_main([str(storages / "study.db"), str(tmp_path), "--study", "other"]) == 2
     assert capsys.readouterr().err.count("\n") == 2
     assert search_figures_main([str(storages / "study.db"), str(tmp_path)]) == 0
+
+
+def test_the_search_figures_command_on_a_full_disk_is_one_line_naming_the_file_and_its_size(storages, tmp_path,
+                                                                                            capsys, monkeypatch):
+    from analysis.search_figures import main as search_figures_main
+    from hersd.contract.errors import DiskFullError
+
+    assert search_figures_main([str(storages / "study.db"), str(tmp_path / "whole")]) == 0
+    table = tmp_path / "whole" / "in_sqlite_best_trials.csv"
+    full_disk_writes(monkeypatch, "*best_trials.csv*")  # the table or its temporary file
+    capsys.readouterr()
+    assert search_figures_main([str(storages / "study.db"), str(tmp_path / "full")]) == 2
+    err = capsys.readouterr().err
+    needs = str(DiskFullError(tmp_path / "full" / table.name, table.stat().st_size)).rsplit(", ", 1)[0]
+    assert err.count("\n") == 1 and err.startswith(f"error: {needs}, "), err
+    assert sorted(path.name for path in (tmp_path / "full").iterdir()) == ["in_sqlite_beta_plane.png"]
 
 
 @pytest.fixture

@@ -9,7 +9,8 @@ import numpy as np
 import optuna
 import pytest
 from optuna.trial import TrialState
-from searches import fails_with, load, only_db, run_meta, tiny_search
+from searches import load, only_db, run_meta, tiny_search
+from user_schedules import command
 
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import read_run
@@ -32,10 +33,15 @@ def test_nan_objective_prunes_the_trial() -> None:
     assert "non-finite" in trial.user_attrs["pruned_reason"]
 
 
-def test_a_run_the_training_layer_refuses_stops_the_search_in_one_line(tmp_path: Path, capsys) -> None:
-    """A refusal found only when a run starts (here: too little memory) would refuse every trial."""
-    err = fails_with(["search.n_trials=3", "ddpg.buffer_size=100000000000", *tiny_search(tmp_path)], capsys)
-    assert "GiB are available; lower ddpg.buffer_size" in err
+def test_a_run_the_training_layer_refuses_stops_the_search_in_one_line(tmp_path: Path) -> None:
+    """A refusal found only when a run starts (here: too little memory) would refuse every trial; Optuna's own
+    line on the trial (its value NaN, "not acceptable") is dropped: the one line says why. In an interpreter of
+    its own, as users run it: Optuna's log handler writes to the stderr it found first."""
+    done = command("sweeps.search.cli:main", ["search.n_trials=3", "ddpg.buffer_size=100000000000",
+                                              *tiny_search(tmp_path)], tmp_path, code=2)
+    lines = [line for line in done.stderr.splitlines() if not line.startswith("[I ")]  # Optuna's info lines
+    assert len(lines) == 1 and lines[0].startswith("hersd-search: error: "), done.stderr
+    assert "GiB are available; lower ddpg.buffer_size" in lines[0]
     refused, waiting = load(only_db(tmp_path)).trials  # the second enqueued set waits for the next run
     assert refused.state == TrialState.FAIL and "lower ddpg.buffer_size" in refused.user_attrs["refused"]
     assert waiting.state == TrialState.WAITING
@@ -67,43 +73,64 @@ def test_pruning_with_seeds_reported_as_one_rising_step(tmp_path: Path, capsys, 
     assert f"figures and tables: hersd-report {shlex.quote(str(tmp_path))}\n" in capsys.readouterr().out
 
 
-def test_a_resumed_run_reads_its_log_once_and_then_takes_each_epochs_record(tmp_path: Path, monkeypatch) -> None:
-    """A run resumed at epoch 3 of 4: epochs 1-2 come from its log, once; epochs 3-4 from the records
-    training hands the callback; every step is reported once, with the running AUC."""
+def test_a_resumed_run_takes_its_earlier_epochs_from_training_and_reads_no_log(tmp_path: Path, monkeypatch) -> None:
+    """A run resumed at epoch 3 of 4: epochs 1-2 come from the records training read (``on_logged``), epochs 3-4
+    from those it hands the callback; every step is reported once, with the running AUC; no log is read here."""
     import sys
     from types import ModuleType, SimpleNamespace
 
-    from hersd.contract.runlog import EPOCH_FIELDS, RunLogWriter
+    from hersd.contract import runlog
+    from hersd.contract.runlog import EPOCH_FIELDS
     from sweeps.search import objective
 
     success = [0.1, 0.2, 0.4, 0.8]
     records = [{**{name: 0.0 for name in EPOCH_FIELDS}, "epoch": k + 1, "test_success": s}
                for k, s in enumerate(success)]
-    log_path = tmp_path / "run" / "run.mcap"
-    log_path.parent.mkdir()
 
-    def resume_at_3(cfg, command="", on_epoch=None):
-        writer = RunLogWriter(log_path, {"run_id": "resumed"})
-        for record in records:
-            writer.write_epoch(record)
-            if record["epoch"] >= 3:  # epochs 1-2 were logged by an earlier session
-                on_epoch(record)
-        writer.finish(len(records))
-        return log_path
+    def resume_at_3(spec, command="", on_epoch=None, on_logged=None):
+        on_logged(records[:2])  # epochs 1-2 were logged by an earlier session
+        for record in records[2:]:
+            on_epoch(record)
+        return tmp_path / "run.mcap"
 
     reads = []
-    read_log = objective.metric_values
-    monkeypatch.setattr(objective, "metric_values", lambda *args: reads.append(args[2:]) or read_log(*args))
+    monkeypatch.setattr(runlog, "read_messages", lambda *args: reads.append(args))
     monkeypatch.setitem(sys.modules, "hersd.engine.train", ModuleType("hersd.engine.train"))
     sys.modules["hersd.engine.train"].train = resume_at_3
     study = optuna.create_study(direction="maximize")
     trial = study.ask()
     plan = SimpleNamespace(search=SimpleNamespace(metric="test_success", seeds=1), epochs=4, train_overrides=[],
                            study_name="test", base=SimpleNamespace(threads="1"))
-    cfg = SimpleNamespace(run_dir=str(log_path.parent), seed=0, threads="1")
+    spec = SimpleNamespace(folder=tmp_path, config=SimpleNamespace(seed=0, threads="1"))
     progress = TrialProgress(trial, "auc", epochs=4)
-    objective.train_seed(trial, plan, progress, {"kind": "constant", "eps": 0.8}, cfg, 0)
-    assert reads == [(2,), ()]  # the epochs before the resume, then the whole log once at the end
+    objective.train_seed(trial, plan, progress, {"kind": "constant", "eps": 0.8}, spec, 0)
+    assert reads == []
     assert study.trials[0].intermediate_values == pytest.approx(
         {k: float(np.mean(success[:k])) for k in range(1, 5)})
     assert progress.value() == pytest.approx(np.mean(success))
+
+
+def test_a_trial_validates_each_runs_config_once_and_reads_no_log(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A trial of 2 seeds, trained for real: TrainConfig's checks run once per seed (its draw's config, resolved
+    once: folder, identity and rates handed to training), and no log is read back (each epoch's record reaches
+    the objective from training); a second search finds both runs complete and reads them through training."""
+    from hersd.contract import config, runlog
+
+    from sweeps.search import objective
+
+    search = ["search.n_trials=1", "search.seeds=2", "search.enqueue=[{beta1: 0.5, beta2: 0.0}]",
+              *tiny_search(tmp_path, epochs=2)]
+    validated, reads = [], []
+    post_init, read_messages, trial_runs = config.TrainConfig.__post_init__, runlog.read_messages, objective.trial_runs
+
+    def counted_trial_runs(*args, **kwargs):  # the trial's first step: count from here (the plan is made before)
+        monkeypatch.setattr(config.TrainConfig, "__post_init__",
+                            lambda self: validated.append(self.seed) or post_init(self))
+        monkeypatch.setattr(runlog, "read_messages", lambda *a: reads.append(a) or read_messages(*a))
+        return trial_runs(*args, **kwargs)
+
+    monkeypatch.setattr(objective, "trial_runs", counted_trial_runs)
+    cli.main(search)
+    (trial,) = load(only_db(tmp_path)).trials
+    assert trial.state == TrialState.COMPLETE, trial.user_attrs
+    assert validated == [0, 1] and reads == []

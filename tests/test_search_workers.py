@@ -11,11 +11,13 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import killed_while_training
 from optuna.trial import TrialState
 from searches import _count_finished, fails_with, load, only_db, run_meta, tiny_search
 
 import hersd.engine.train
 from hersd.contract.cores import available_cores
+from hersd.contract.runlog import read_run
 from sweeps.search import cli, plan as search_plan, workers
 from sweeps.search.config import SlurmConfig
 from sweeps.search.storage import open_storage
@@ -73,11 +75,11 @@ def test_crashed_run_fails_its_trial_and_the_study_goes_on(tmp_path: Path, monke
     real_train, real_compose = hersd.engine.train.train, search_plan.compose_train
     calls, composed = [], []
 
-    def crash_first(cfg, command="", on_epoch=None):
-        calls.append(cfg)
+    def crash_first(spec, command="", on_epoch=None, on_logged=None):
+        calls.append(spec)
         if len(calls) == 1:
             raise RuntimeError("simulated crash")
-        return real_train(cfg, command=command, on_epoch=on_epoch)
+        return real_train(spec, command=command, on_epoch=on_epoch, on_logged=on_logged)
 
     monkeypatch.setattr(hersd.engine.train, "train", crash_first)
     monkeypatch.setattr(search_plan, "compose_train", lambda overrides: composed.append(1) or real_compose(overrides))
@@ -131,7 +133,7 @@ def _interrupted_search(tmp_path: Path, capfd) -> list[str]:
 
 
 def test_ctrl_c_in_training_is_one_line_without_optunas_traceback(tmp_path: Path, capfd, monkeypatch) -> None:
-    def interrupted(cfg, command="", on_epoch=None):
+    def interrupted(spec, command="", on_epoch=None, on_logged=None):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(hersd.engine.train, "train", interrupted)
@@ -143,7 +145,7 @@ def test_ctrl_c_in_training_is_one_line_without_optunas_traceback(tmp_path: Path
 def test_ctrl_c_in_optunas_bookkeeping_is_one_line(tmp_path: Path, capfd, monkeypatch) -> None:
     """A Ctrl-C while Optuna records a trial's end makes Optuna fail with another error raised while handling
     it (UnboundLocalError in optuna 4-5); that is the Ctrl-C too, and the trial is left to be re-run as lost."""
-    def crash(cfg, command="", on_epoch=None):
+    def crash(spec, command="", on_epoch=None, on_logged=None):
         raise RuntimeError("simulated crash")
 
     def interrupting_storage(spec: str):
@@ -161,3 +163,27 @@ def test_ctrl_c_in_optunas_bookkeeping_is_one_line(tmp_path: Path, capfd, monkey
     monkeypatch.setattr(hersd.engine.train, "train", crash)
     monkeypatch.setattr(workers, "open_storage", interrupting_storage)
     assert _interrupted_search(tmp_path, capfd) == ["hersd-search: interrupted; re-run the same command to resume"]
+
+
+def test_the_workers_end_within_a_second_of_a_killed_search_and_the_same_command_finishes_their_trials(
+        tmp_path: Path) -> None:
+    """kill -9 of the search's main process alone (no signal reaches its workers): its two workers, training, end
+    within seconds, each with one line saying so, and the resource tracker they share with them; the same command
+    then re-runs their trials, which resume their runs."""
+    args = ["search.n_jobs=2", "search.n_trials=2", "search.pruner.kind=none", "task=reach", "epochs=20",
+            "task.cycles_per_epoch=1", "ddpg.batches_per_cycle=1", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
+            "render_every=0", "bias.epochs=[]", f"results_dir={tmp_path}"]
+    killed = killed_while_training([sys.executable, "-c", "from sweeps.search.cli import main; main()", *args],
+                                   tmp_path, stderr=tmp_path / "killed.err")
+    ended = [line for line in (tmp_path / "killed.err").read_text().splitlines()
+             if line.startswith(f"hersd-search: its main process (pid {killed}) is gone; its worker ")]
+    assert len(ended) == 2, (tmp_path / "killed.err").read_text()[-3000:]
+
+    cli.main(args)  # the same command again
+    study = load(only_db(tmp_path))
+    lost = [trial for trial in study.trials if "lost" in trial.user_attrs]
+    retried = sorted(trial.user_attrs["retry_of"] for trial in study.get_trials(states=(TrialState.COMPLETE,)))
+    assert len(lost) == 2 and retried == sorted(trial.number for trial in lost)
+    for trial in study.get_trials(states=(TrialState.COMPLETE,)):
+        log = read_run(Path(trial.user_attrs["run_dirs"][0]) / "run.mcap")
+        assert log.complete and len(log.epochs) == 20 and log.sessions[-1]["resumed_from_epoch"] >= 1

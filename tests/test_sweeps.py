@@ -6,10 +6,10 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
+from helpers import group_alive, killed_while_training
 
 from hersd.contract.cores import available_cores
 from hersd.contract.runlog import read_run
@@ -240,6 +240,26 @@ def test_smoke_grid_makes_one_complete_log_per_run_then_skips_them(tmp_path):
     assert [p.stat().st_mtime_ns for p in logs] == stamps
 
 
+def test_a_sweeps_jobs_train_the_runs_its_planner_resolved(tmp_path, monkeypatch):
+    """Each run is resolved once, in the sweeping process (folder, identity, rates): the jobs take their spec from
+    the sweep's specs.pkl by their overrides (threads added), and a job finding its spec there resolves nothing."""
+    import pickle
+
+    from sweeps import plan
+
+    sweep("task=reach", "seeds=2", "epochs=1", *TINY, f"results_dir={tmp_path}")
+    (specs_file,) = tmp_path.glob(f".sweeps/*/{plan.SPECS_NAME}")
+    specs = pickle.loads(specs_file.read_bytes())
+    assert len(specs) == 2
+    for job, spec in specs.items():
+        meta = read_run(spec.folder / "run.mcap").meta
+        assert meta["run_id"] == spec.run_id and meta["config"]["threads"] == spec.config.threads
+        assert f"threads={spec.config.threads}" in job and meta["command"] == f"hersd-sweep {' '.join(job)}"
+    monkeypatch.setattr(plan, "job_train_config", lambda cfg: pytest.fail("the job resolved its run again"))
+    job, spec = next(iter(specs.items()))
+    assert plan.job_spec(None, specs_file.parent, list(job)).run_id == spec.run_id
+
+
 def test_a_failed_run_does_not_stop_the_sweep(tmp_path):
     # seed 1's run directory is blocked by a file, so that run (only) fails
     ok = sweep("+grid=smoke", "schedule=constant", *TINY, "--dry-run", f"results_dir={tmp_path}")
@@ -250,6 +270,55 @@ def test_a_failed_run_does_not_stop_the_sweep(tmp_path):
     assert result.returncode == 1 and "Traceback" not in result.stderr
     assert "1 done" in result.stdout and "1 failed" in result.stdout
     assert len(list(tmp_path.rglob("run.mcap"))) == 1
+
+
+# hersd-sweep whose disk fills at its run's epoch 2 (the run trains in the sweep's own process: hydra/launcher=basic):
+# from then on every file written fails as on a full disk: the run's log, then its error.log, then the sweep's
+# progress file.
+FULL_DISK_SWEEP = """
+import sys
+import pytest
+import hersd.engine.train as train_module
+from helpers import full_disk_writes
+from sweeps.launch import main
+
+run_epoch = train_module.run_epoch
+
+def filling(state, epoch, *args, **kwargs):
+    if epoch == 2:
+        full_disk_writes(pytest.MonkeyPatch(), "*")
+    return run_epoch(state, epoch, *args, **kwargs)
+
+train_module.run_epoch = filling
+sys.argv[0] = "hersd-sweep"
+main()
+"""
+
+
+def test_a_full_disk_that_leaves_no_room_for_a_failed_runs_error_log_is_one_line_with_exit_2(tmp_path):
+    """The run stops on a full disk (its log at epoch 2) and its error.log cannot be written either: one line
+    naming error.log, the bytes it needs and the run's error, exit 2, no error.log or temporary file; once space
+    is freed the same command resumes the run from its epoch 1."""
+    args = ["+grid=smoke", "schedule=constant", "seeds=1", "epochs=3", *TINY, "hydra/launcher=basic",
+            f"results_dir={tmp_path}"]
+    full = subprocess.run([sys.executable, "-c", FULL_DISK_SWEEP, *args], capture_output=True, text=True, timeout=600,
+                          cwd=Path(__file__).parent)
+    (run,) = [log.parent for log in tmp_path.rglob("run.mcap")]
+    err = full.stderr.strip()
+    assert full.returncode == 2 and len(err.splitlines()) == 1, full.stdout[-2000:] + full.stderr[-3000:]
+    assert err.startswith(f"hersd-sweep: error: no space left on the device of {run / 'error.log'}: writing it needs ")
+    assert f" free; the run stopped with DiskFullError: no space left on the device of " \
+           f"{run / 'run.mcap'}: writing it needs " in err
+    assert err.endswith("; free some and run the same command again (finished runs are kept and skipped, the others "
+                        "resume)")
+    assert sorted(path.name for path in run.iterdir()) == ["checkpoint.pt", "run.lock", "run.mcap"]  # no .tmp
+    assert list(read_run(run / "run.mcap").epochs["epoch"]) == [1]
+    assert "1 failed" in full.stdout and not list(tmp_path.rglob("*.tmp"))
+
+    result = sweep(*args)  # space freed
+    assert "1 resumed" in result.stdout and "0 failed" in result.stdout
+    log = read_run(run / "run.mcap")
+    assert log.complete and list(log.epochs["epoch"]) == [1, 2, 3] and log.sessions[1]["resumed_from_epoch"] == 1
 
 
 def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
@@ -279,38 +348,38 @@ def test_killed_sweep_finishes_on_rerun_without_loss_or_duplicates(tmp_path):
         assert progress.count(str(path.parent)) == 1
 
 
-def group_alive(group: int, seconds: float = 10.0) -> bool:
-    """Whether processes of the process group ``group`` are still running after ``seconds``."""
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        try:
-            os.killpg(group, 0)
-        except ProcessLookupError:
-            return False
-        time.sleep(0.1)
-    return True
-
-
 def test_the_workers_end_within_seconds_of_a_killed_sweep_and_the_same_command_finishes_their_runs(tmp_path):
     """kill -9 of the sweep's main process alone (no signal reaches its workers): its two workers, training,
     and the resource trackers they share end within seconds; the same command then resumes both runs."""
     args = ["+grid=smoke", "schedule=constant", "seeds=2", "epochs=10", *TINY, "hydra.launcher.n_jobs=2",
             f"results_dir={tmp_path}"]
-    proc = subprocess.Popen([*SWEEP, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-    deadline = time.monotonic() + 300
-    while len(list(tmp_path.rglob("checkpoint.pt"))) < 2 and time.monotonic() < deadline:  # both runs training
-        time.sleep(0.2)
-    assert proc.poll() is None
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert not group_alive(proc.pid, seconds=5)  # the workers and the resource trackers are gone
+    killed_while_training([*SWEEP, *args], tmp_path)
     result = sweep(*args)
     assert "2 resumed, 0 running elsewhere, 0 failed" in result.stdout, result.stdout
     for log_path in tmp_path.rglob("run.mcap"):
         log = read_run(log_path)
         assert log.complete and list(log.epochs["epoch"]) == list(range(1, 11))
         assert len(log.sessions) == 2 and log.sessions[1]["resumed_from_epoch"] >= 1
+
+
+def test_the_sweep_names_its_main_process_to_its_jobs_for_the_launch_only(monkeypatch):
+    """watched_by_jobs sets HERSD_SWEEP_PROCESS for the processes the launch starts and restores it after (a sweep
+    run inside another process, a test's, leaves nothing behind); jobs that train elsewhere are not named it."""
+    from types import SimpleNamespace
+
+    from sweeps.launchers import SWEEP_ENV, main_process, watched_by_jobs
+
+    monkeypatch.delenv(SWEEP_ENV, raising=False)
+    launcher = SimpleNamespace(joblib={"n_jobs": 4})
+    with watched_by_jobs(launcher, 2):
+        assert os.environ[SWEEP_ENV] == main_process() and launcher.joblib["n_jobs"] == 2
+    assert SWEEP_ENV not in os.environ
+    monkeypatch.setenv(SWEEP_ENV, "1:2")
+    with watched_by_jobs(launcher, 1, here=False):
+        assert os.environ[SWEEP_ENV] == "1:2" and launcher.joblib["n_jobs"] == 2
+    with watched_by_jobs(launcher, 1):
+        assert os.environ[SWEEP_ENV] == main_process()
+    assert os.environ[SWEEP_ENV] == "1:2"
 
 
 def test_ctrl_c_ends_a_sweep_with_one_line_and_exit_130_and_keeps_its_work(tmp_path):

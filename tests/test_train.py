@@ -422,9 +422,9 @@ def _fill_the_disk_at_epoch_3(monkeypatch, where: str) -> None:
     full = {"on": False}
     run_epoch, fsync, save = train_module.run_epoch, os.fsync, torch.save
 
-    def filling_run_epoch(state, epoch):
+    def filling_run_epoch(state, epoch, rate=None):
         full["on"] = epoch >= 3
-        return run_epoch(state, epoch)
+        return run_epoch(state, epoch, rate)
 
     def full_fsync(fd):
         if full["on"]:

@@ -308,7 +308,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Optional
 
-from hersd.contract.config import TD3Config
+from hersd.contract.learners.td3 import TD3Config
 from hersd.engine.learners.td3 import TD3
 
 if TYPE_CHECKING:

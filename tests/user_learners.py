@@ -5,7 +5,7 @@ tests/test_render.py)."""
 LATE = '''
 from dataclasses import dataclass
 
-from hersd.contract.config import TD3Config
+from hersd.contract.learners.td3 import TD3Config
 from hersd.contract.errors import ConfigError
 from hersd.engine.learners.td3 import TD3
 

@@ -12,7 +12,8 @@ from pathlib import Path
 MODULE = "newcomer_steps"
 
 # KStep declares no tag, label or kind: the defaults name its folders; Warp's settings share eq. 9's names. Over's rate leaves [0, 1] from the
-# start, LateOver's (adaptive) at epoch 2, LateRaise's (adaptive) raises there; Boom's rate raises once a run is under way (epoch 2), after the checks.
+# start, LateOver's (adaptive) at epoch 2, LateRaise's (adaptive) raises there. A fixed schedule's rates are all computed
+# when its run is resolved, before any work: what fails once a run is under way is CRASH's learner (below).
 SOURCE = '''
 from dataclasses import dataclass
 
@@ -62,20 +63,28 @@ class LateRaise(Schedule):
 
     def rate(self, k, total_epochs, train_success=()):
         return 0.9 / (2 - k)
+'''
+
+CRASH_MODULE = "newcomer_crash"
+# A learner whose update raises once a run is under way (its epoch 2 at 2 cycles x 5 updates, searches.TINY's),
+# after every check: learner._target_=newcomer_crash.Crash.
+CRASH = '''
+from hersd.engine.learners.ddpg import DDPG
 
 
-@dataclass
-class Boom(KStep):
-    def rate(self, k, total_epochs, train_success=()):
-        if len(train_success) >= 1:
-            raise RuntimeError("boom at epoch %d" % k)
-        return super().rate(k, total_epochs, train_success)
+class Crash(DDPG):
+    def update(self, batch):
+        self.calls = getattr(self, "calls", 0) + 1
+        if self.calls > 10:
+            raise RuntimeError("boom at epoch 2")
+        return super().update(batch)
 '''
 
 
 def write_module(folder: Path) -> Path:
-    """The module ``newcomer_steps`` written into ``folder`` -> ``folder``."""
+    """The modules ``newcomer_steps`` and ``newcomer_crash`` written into ``folder`` -> ``folder``."""
     (folder / f"{MODULE}.py").write_text(SOURCE)
+    (folder / f"{CRASH_MODULE}.py").write_text(CRASH)
     return folder
 
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from hersd.contract.config import TrainConfig, to_train_config
+from hersd.contract.config import PACKAGE_LEARNERS, TrainConfig, to_train_config
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import TARGET_KEY, entry_point_names, typed_instead
 from hersd.contract.schedules import schedule_from_record
@@ -53,13 +53,18 @@ def open_schedule(schema: type) -> DictConfig:
 
 
 def register_train_schema() -> None:
-    """``train_schema``, which conf/train.yaml lists first; and ``learner=<name>`` for each learner another package
-    declares (an entry point of ``hersd.learners``), as conf/learner/<name>.yaml is for the package's."""
+    """``train_schema``, which conf/train.yaml lists first; and ``learner=<name>`` for each learner without a
+    conf/learner/<name>.yaml: the package's (their cards) and other packages' (entry points of ``hersd.learners``)."""
     register_schema("train_schema", open_schedule(TrainConfig))
     files = set(group_options("learner"))
-    for name in entry_point_names():
+    for name in learner_names():
         if name not in files:
             register_schema(name, {"name": name}, group="learner")
+
+
+def learner_names() -> list[str]:
+    """The learners selected by name alone: the package's (:data:`PACKAGE_LEARNERS`) and other packages'."""
+    return [*PACKAGE_LEARNERS, *entry_point_names()]
 
 
 def compose(config_name: str | None, overrides: list[str], job_name: str, with_hydra: bool = False) -> DictConfig:
@@ -90,8 +95,8 @@ def group_options(group: str) -> list[str]:
 
 
 def group_choices(group: str) -> list[str]:
-    """A group's choices on the command line: its configs, and for ``learner`` the learners of other packages."""
-    return sorted({*group_options(group), *(entry_point_names() if group == "learner" else ())})
+    """A group's choices on the command line: its configs, and for ``learner`` every learner selected by name."""
+    return sorted({*group_options(group), *(learner_names() if group == "learner" else ())})
 
 
 def null_group(overrides: list[str]) -> str | None:

@@ -12,17 +12,21 @@ Every default is the seed paper's appendix setting (which follows the reference 
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 import typing
-from contextvars import ContextVar
 from dataclasses import asdict, dataclass, field
 from typing import Any, List, Optional
 
 from omegaconf import DictConfig, OmegaConf
 
+from hersd.contract.checks import (HORIZON_LIMIT, LR_LIMIT, SCALE_LIMIT, check, check_number, is_finite,
+                                   settings_of)
 from hersd.contract.errors import ConfigError
 from hersd.contract.learner_registry import learner_class, recorded_name
+from hersd.contract.learners import package_cards
+# TD3's and SAC's settings were defined here before the cards: users' learners still import them from here.
+from hersd.contract.learners.sac import SACConfig  # noqa: F401
+from hersd.contract.learners.td3 import TD3Config  # noqa: F401
 from hersd.contract.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
 from hersd.contract.schedules.registry import raised
 from hersd.contract.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
@@ -32,41 +36,10 @@ GOAL_STRATEGIES = ("future", "final", "episode")
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("fp32", "bf16")
 UPDATES = ("autograd", "fast")
-FAST_UPDATE_LEARNERS = ("ddpg", "td3")  # the NAMEs of fast.py's FAST_CLASSES (tests/test_fast_update.py checks)
-
-# Ranges the float32 arithmetic of an update needs (docs/ARCHITECTURE.md, "Ranges of the settings").
-# The discount's horizon H = 1/(1-gamma) is at most HORIZON_LIMIT: a float32 Q near -lambda*H (24-bit
-# significand, 1 part in 1.7e7) then still resolves one reward of lambda, and float32(gamma) < 1.
-HORIZON_LIMIT = 1e6
-# Weights and scales set by the user (lambda_r, lambda_h, action_l2, SAC's alpha, noise stds, input
-# clips) are at most SCALE_LIMIT: Q targets then stay within q_min = -max(lambda) * H >= -1e12, so a
-# squared TD error (<= 4e24), a batch's sum of them (batches < 1e9 transitions fit any memory) and
-# Adam's squared gradients stay below float32's 3.4e38. Weights and the normaliser's std floor are at
-# least 1/SCALE_LIMIT: far smaller, gradients sink below Adam's eps (1e-8) and learning stalls.
-SCALE_LIMIT = 1e6
-# Adam moves every weight by about lr per step; initial weights lie within +-1/sqrt(fan_in) <= 1, so a
-# rate above 1 replaces the network at each update (and its float32 weights soon overflow).
-LR_LIMIT = 1.0
 # rank ** (1/temperature) stays below float64's 1.8e308 summed over n episodes while
 # (1 + 1/temperature) * ln(n) < 709.8: with temperature >= 0.05, for n < 4e14 episodes (any memory).
 MEP_MIN_TEMPERATURE = 0.05
 MAX_THREADS = 1024  # threads=N at most: torch takes a C int, and no machine here has more cores
-
-
-def _check(condition: bool, message: str) -> None:
-    if not condition:
-        raise ConfigError(message)
-
-
-def _is_finite(value: float) -> bool:
-    return isinstance(value, (int, float)) and math.isfinite(value)
-
-
-def _check_number(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
-    """ConfigError (one line) unless ``value`` is a finite number in [low, high] ((low, high] if low_open)."""
-    above_low = _is_finite(value) and (value > low if low_open else value >= low)
-    _check(above_low and value <= high,
-           f"{name} must be a number in {'(' if low_open else '['}{low:g}, {high:g}], got {value}")
 
 
 @dataclass
@@ -80,19 +53,19 @@ class TaskConfig:
 
     def __post_init__(self) -> None:
         if self.name == CUSTOM:
-            _check(bool(self.env_id), "task=custom needs task.env_id=<a goal-conditioned gymnasium-robotics env id>")
+            check(bool(self.env_id), "task=custom needs task.env_id=<a goal-conditioned gymnasium-robotics env id>")
         else:
-            _check(self.name in TASKS or (self.env_id and self.name == self.env_id),  # a resolved custom task
-                   f"task={self.name!r} is not a known task; choose one of: {', '.join([*TASKS, CUSTOM])}")
+            check(self.name in TASKS or (self.env_id and self.name == self.env_id),  # a resolved custom task
+                  f"task={self.name!r} is not a known task; choose one of: {', '.join([*TASKS, CUSTOM])}")
             expected = TASKS[self.name].env_id if self.name in TASKS else self.name
-            _check(self.env_id in (None, expected),
-                   f"task.env_id={self.env_id!r} does not match task={self.name!r} ({expected}); "
-                   f"for another env use task=custom task.env_id={self.env_id}")
-        _check(self.cycles_per_epoch is None or self.cycles_per_epoch >= 1,
-               f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
+            check(self.env_id in (None, expected),
+                  f"task.env_id={self.env_id!r} does not match task={self.name!r} ({expected}); "
+                  f"for another env use task=custom task.env_id={self.env_id}")
+        check(self.cycles_per_epoch is None or self.cycles_per_epoch >= 1,
+              f"task.cycles_per_epoch must be >= 1, got {self.cycles_per_epoch}")
         if self.distance_threshold is not None:
-            _check(_is_finite(self.distance_threshold) and self.distance_threshold > 0,
-                   f"task.distance_threshold must be a positive number of metres or null, got {self.distance_threshold}")
+            check(is_finite(self.distance_threshold) and self.distance_threshold > 0,
+                  f"task.distance_threshold must be a positive number of metres or null, got {self.distance_threshold}")
 
     def resolve(self) -> None:
         """Fill the null env_id and cycles_per_epoch from the task table; a custom task takes its
@@ -117,13 +90,13 @@ class MEPConfig:
     max_iter: int = 100  # EM iterations per fit at most (fits after the first start from the last one)
 
     def __post_init__(self) -> None:
-        _check(_is_finite(self.temperature) and self.temperature >= MEP_MIN_TEMPERATURE,
-               f"algo.mep.temperature must be a number >= {MEP_MIN_TEMPERATURE:g} (rank ** (1 / temperature) "
-               f"overflows below), got {self.temperature}")
-        _check(self.n_components >= 1, f"algo.mep.n_components must be >= 1, got {self.n_components}")
-        _check(self.fit_subsample >= self.n_components,
-               f"algo.mep.fit_subsample must be >= algo.mep.n_components, got {self.fit_subsample}")
-        _check(self.max_iter >= 1, f"algo.mep.max_iter must be >= 1, got {self.max_iter}")
+        check(is_finite(self.temperature) and self.temperature >= MEP_MIN_TEMPERATURE,
+              f"algo.mep.temperature must be a number >= {MEP_MIN_TEMPERATURE:g} (rank ** (1 / temperature) "
+              f"overflows below), got {self.temperature}")
+        check(self.n_components >= 1, f"algo.mep.n_components must be >= 1, got {self.n_components}")
+        check(self.fit_subsample >= self.n_components,
+              f"algo.mep.fit_subsample must be >= algo.mep.n_components, got {self.fit_subsample}")
+        check(self.max_iter >= 1, f"algo.mep.max_iter must be >= 1, got {self.max_iter}")
 
 
 @dataclass
@@ -135,10 +108,10 @@ class AlgoConfig:
     mep: MEPConfig = field(default_factory=MEPConfig)
 
     def __post_init__(self) -> None:
-        _check(self.goal_strategy in GOAL_STRATEGIES,
-               f"algo.goal_strategy={self.goal_strategy!r} is unknown; choose one of: {', '.join(GOAL_STRATEGIES)}")
+        check(self.goal_strategy in GOAL_STRATEGIES,
+              f"algo.goal_strategy={self.goal_strategy!r} is unknown; choose one of: {', '.join(GOAL_STRATEGIES)}")
         for name in ("lambda_r", "lambda_h"):
-            _check_number(f"algo.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
+            check_number(f"algo.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
 
 
 def ScheduleConfig(kind: str = DEFAULT.kind, **settings: Any) -> Schedule:
@@ -170,21 +143,29 @@ class DDPGConfig:
     def __post_init__(self) -> None:
         for name in ("hidden_layers", "hidden_units", "buffer_size", "batch_size", "rollouts_per_cycle",
                      "batches_per_cycle", "test_rollouts"):
-            _check(getattr(self, name) >= 1, f"ddpg.{name} must be >= 1, got {getattr(self, name)}")
-        _check(self.batch_size <= self.buffer_size,
-               f"ddpg.batch_size must be in [1, ddpg.buffer_size={self.buffer_size}], got {self.batch_size}")
+            check(getattr(self, name) >= 1, f"ddpg.{name} must be >= 1, got {getattr(self, name)}")
+        check(self.batch_size <= self.buffer_size,
+              f"ddpg.batch_size must be in [1, ddpg.buffer_size={self.buffer_size}], got {self.batch_size}")
         for name in ("actor_lr", "critic_lr"):
-            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, LR_LIMIT, low_open=True)
+            check_number(f"ddpg.{name}", getattr(self, name), 0.0, LR_LIMIT, low_open=True)
         for name in ("clip_obs", "clip_norm", "norm_eps"):
-            _check_number(f"ddpg.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
+            check_number(f"ddpg.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
         for name in ("polyak", "random_eps"):
-            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, 1.0)
+            check_number(f"ddpg.{name}", getattr(self, name), 0.0, 1.0)
         for name in ("noise_eps", "action_l2"):
-            _check_number(f"ddpg.{name}", getattr(self, name), 0.0, SCALE_LIMIT)
+            check_number(f"ddpg.{name}", getattr(self, name), 0.0, SCALE_LIMIT)
         if self.gamma is not None:
-            _check(_is_finite(self.gamma) and 0.0 < self.gamma <= 1.0 - 1.0 / HORIZON_LIMIT,
-                   f"ddpg.gamma must be in (0, {1.0 - 1.0 / HORIZON_LIMIT:.6f}] (1/(1-gamma) <= {HORIZON_LIMIT:g}) "
-                   f"or null, got {self.gamma}")
+            check(is_finite(self.gamma) and 0.0 < self.gamma <= 1.0 - 1.0 / HORIZON_LIMIT,
+                  f"ddpg.gamma must be in (0, {1.0 - 1.0 / HORIZON_LIMIT:.6f}] (1/(1-gamma) <= {HORIZON_LIMIT:g}) "
+                  f"or null, got {self.gamma}")
+
+
+# The package's learners (hersd/engine/learners/), read from their cards (hersd/contract/learners/) without
+# importing torch: name -> the settings class its class declares, and the names that have an update=fast. Any
+# other learner (an entry point, learner._target_=<module>.<Class>) is imported to ask its class.
+PAPER_LEARNER = "ddpg"  # the seed paper's learner: the default, and that of every run made before learners existed
+PACKAGE_LEARNERS: dict[str, Optional[type]] = {name: card.settings for name, card in package_cards().items()}
+FAST_UPDATE_LEARNERS = tuple(name for name, card in package_cards().items() if card.fast_update)
 
 
 def no_fast_update(name: str) -> str:
@@ -193,48 +174,6 @@ def no_fast_update(name: str) -> str:
            "use update=autograd"
 
 
-# The key of the learner whose settings learner_settings is building: a subclass's settings are checked by its
-# parent's __post_init__, whose messages then name the subclass's key (learner.td3late.*), not the parent's.
-_SETTINGS_KEY: ContextVar[Optional[str]] = ContextVar("learner_settings_key", default=None)
-
-
-def setting_name(key: str, name: str) -> str:
-    """``learner.<key>.<name>``, under the key of the learner whose settings are being built, if any, else ``key``."""
-    return f"learner.{_SETTINGS_KEY.get() or key}.{name}"
-
-
-@dataclass
-class TD3Config:
-    # TD3 (Fujimoto et al. 2018): twin critics (the target takes their minimum), target policy smoothing.
-    policy_noise: float = 0.2  # std of the Gaussian noise on target actions, as a share of max action
-    noise_clip: float = 0.5  # that noise is clipped to +-noise_clip (share of max action)
-    policy_delay: int = 2  # the actor steps once per policy_delay critic steps
-
-    def __post_init__(self) -> None:
-        for name in ("policy_noise", "noise_clip"):
-            _check_number(setting_name("td3", name), getattr(self, name), 0.0, SCALE_LIMIT)
-        _check(self.policy_delay >= 1, f"{setting_name('td3', 'policy_delay')} must be >= 1, got {self.policy_delay}")
-
-
-@dataclass
-class SACConfig:
-    # SAC (Haarnoja et al. 2018, automatic temperature): squashed Gaussian policy, twin critics.
-    init_alpha: float = 1.0  # initial entropy temperature alpha (log alpha 0: the usual start; the SAC paper gives none)
-    alpha_lr: float = 1e-3  # Adam learning rate of log(alpha): the networks' (ddpg.actor_lr), as SAC uses one rate for every parameter
-    target_entropy: Optional[float] = None  # entropy alpha steers the policy to; null: -dim(A), the SAC paper's
-
-    def __post_init__(self) -> None:
-        _check_number(setting_name("sac", "init_alpha"), self.init_alpha, 1 / SCALE_LIMIT, SCALE_LIMIT)
-        _check_number(setting_name("sac", "alpha_lr"), self.alpha_lr, 0.0, LR_LIMIT, low_open=True)
-        if self.target_entropy is not None:
-            _check_number(setting_name("sac", "target_entropy"), self.target_entropy, -SCALE_LIMIT, SCALE_LIMIT)
-
-
-# The package's first learners and their settings classes, as the classes declare them (``SETTINGS``),
-# known here without importing torch (tests/test_learners.py checks they agree). Any other learner (a module
-# of hersd/engine/learners/, an entry point, learner._target_=<module>.<Class>) is imported to ask its class.
-PAPER_LEARNER = "ddpg"  # the seed paper's learner: the default, and that of every run made before learners existed
-PACKAGE_LEARNERS: dict[str, Optional[type]] = {PAPER_LEARNER: None, "td3": TD3Config, "sac": SACConfig}
 LEARNER_TARGET_KEY = "_target_"
 
 
@@ -250,9 +189,9 @@ def learner_settings_class(name: str) -> tuple[str, Optional[type]]:
         return name, PACKAGE_LEARNERS[name]
     cls = learner_class(name, known=tuple(PACKAGE_LEARNERS))  # imports the class's module (and torch)
     recorded = recorded_name(cls)
-    _check(cls.SETTINGS is None or learner_key(recorded) not in ("name", LEARNER_TARGET_KEY),
-           f"learner {recorded}: its settings would be learner.{learner_key(recorded)}.*, which is learner's own "
-           f"key; rename the class or give it NAME = \"<another name>\"")
+    check(cls.SETTINGS is None or learner_key(recorded) not in ("name", LEARNER_TARGET_KEY),
+          f"learner {recorded}: its settings would be learner.{learner_key(recorded)}.*, which is learner's own "
+          f"key; rename the class or give it NAME = \"<another name>\"")
     return recorded, cls.SETTINGS
 
 
@@ -277,11 +216,11 @@ class LearnerConfig:
     def __post_init__(self) -> None:
         self.name, settings_class = learner_settings_class(self.name)
         if settings_class is None:
-            _check(self.settings is None, f"learner {self.name} has no settings of its own")
+            check(self.settings is None, f"learner {self.name} has no settings of its own")
         elif self.settings is None:
             self.settings = settings_class()
-        _check(self.settings is None or isinstance(self.settings, settings_class),
-               f"learner {self.name}: its settings must be a {getattr(settings_class, '__name__', None)}")
+        check(self.settings is None or isinstance(self.settings, settings_class),
+              f"learner {self.name}: its settings must be a {getattr(settings_class, '__name__', None)}")
 
 
 def learner_from_config(node: Any) -> LearnerConfig:
@@ -292,18 +231,18 @@ def learner_from_config(node: Any) -> LearnerConfig:
         return node
     sections = dict(node)
     target, name = sections.pop(LEARNER_TARGET_KEY, None), sections.pop("name", None)
-    _check(not (target and name), f"learner={name} and learner.{LEARNER_TARGET_KEY}={target}: give one of them")
+    check(not (target and name), f"learner={name} and learner.{LEARNER_TARGET_KEY}={target}: give one of them")
     name, settings_class = learner_settings_class(target or name or PAPER_LEARNER)
     own_key = learner_key(name)
     own = sections.pop(own_key, None)
     parents = parent_keys(name) if sections else set()
     for key, section in sections.items():
-        _check(key not in parents, f"learner {name} reads learner.{own_key}.*, not learner.{key}.* (its parent's): "
-               f"set learner.{own_key}.<setting>; in a sweep beside {key}, give {key}'s settings in a learner "
-               f"config of your own (name: {key} and {key}: {{<setting>: <value>}}; docs/LEARNERS.md)")
-        _check(PACKAGE_LEARNERS.get(key) is not None, no_setting(name, settings_class, key))
+        check(key not in parents, f"learner {name} reads learner.{own_key}.*, not learner.{key}.* (its parent's): "
+              f"set learner.{own_key}.<setting>; in a sweep beside {key}, give {key}'s settings in a learner "
+              f"config of your own (name: {key} and {key}: {{<setting>: <value>}}; docs/LEARNERS.md)")
+        check(PACKAGE_LEARNERS.get(key) is not None, no_setting(name, settings_class, key))
         learner_settings(key, PACKAGE_LEARNERS[key], section)
-    _check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
+    check(settings_class is not None or not own, f"learner {name} has no settings; drop learner.{learner_key(name)}")
     return LearnerConfig(name, learner_settings(own_key, settings_class, own or {}, name) if settings_class else None)
 
 
@@ -322,24 +261,22 @@ def learner_settings(key: str, settings_class: type, section: Any, name: Optiona
     """``settings_class(**section)``; ConfigError (one line) for a key it lacks, a section that is no mapping, or
     an error other than ConfigError its ``__post_init__`` raises (naming the learner ``name``, else ``key``)."""
     fields = [item.name for item in dataclasses.fields(settings_class)]
-    _check(isinstance(section, dict), f"learner.{key} must hold settings ({', '.join(fields)}), got {section!r}")
+    check(isinstance(section, dict), f"learner.{key} must hold settings ({', '.join(fields)}), got {section!r}")
     unknown = sorted(set(section) - set(fields))
-    _check(not unknown, f"learner.{key}.{unknown[0] if unknown else ''} is not a setting; "
-           f"its settings: {', '.join(fields) or 'none'}")
+    check(not unknown, f"learner.{key}.{unknown[0] if unknown else ''} is not a setting; "
+          f"its settings: {', '.join(fields) or 'none'}")
     types = _field_types(settings_class)
     values = {field_name: _typed(f"learner.{key}.{field_name}", types.get(field_name), value)
               for field_name, value in section.items()}
-    token = _SETTINGS_KEY.set(key)  # the class's own range checks name this key (setting_name)
     try:
-        return settings_class(**values)
+        with settings_of(key):  # the class's own range checks name this key (setting_name)
+            return settings_class(**values)
     except ConfigError:
         raise
     except Exception as err:  # noqa: BLE001 - a user's __post_init__: one line naming it, before any work
         given = " ".join(f"learner.{key}.{field_name}={value}" for field_name, value in section.items())
         raise ConfigError(f"learner {name or key}: its settings refused {given or 'their defaults'}: {raised(err)}") \
             from None
-    finally:
-        _SETTINGS_KEY.reset(token)
 
 
 def _field_types(settings_class: type) -> dict[str, Any]:
@@ -414,12 +351,12 @@ class BiasConfig:
     return_steps: int = 300
 
     def __post_init__(self) -> None:
-        _check(all(isinstance(k, int) and k >= 1 for k in self.epochs),
-               f"bias.epochs must be a list of epochs >= 1 ([] for never), got {list(self.epochs)}")
-        _check(self.episodes >= 1, f"bias.episodes must be >= 1, got {self.episodes}")
-        _check(self.hindsight_pairs >= 0, f"bias.hindsight_pairs must be >= 0, got {self.hindsight_pairs}")
-        _check(self.moved_pairs >= 0, f"bias.moved_pairs must be >= 0, got {self.moved_pairs}")
-        _check(self.return_steps >= 1, f"bias.return_steps must be >= 1, got {self.return_steps}")
+        check(all(isinstance(k, int) and k >= 1 for k in self.epochs),
+              f"bias.epochs must be a list of epochs >= 1 ([] for never), got {list(self.epochs)}")
+        check(self.episodes >= 1, f"bias.episodes must be >= 1, got {self.episodes}")
+        check(self.hindsight_pairs >= 0, f"bias.hindsight_pairs must be >= 0, got {self.hindsight_pairs}")
+        check(self.moved_pairs >= 0, f"bias.moved_pairs must be >= 0, got {self.moved_pairs}")
+        check(self.return_steps >= 1, f"bias.return_steps must be >= 1, got {self.return_steps}")
 
 
 @dataclass
@@ -468,23 +405,23 @@ class TrainConfig:
     tensorboard: bool = False
 
     def __post_init__(self) -> None:
-        _check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
+        check(self.epochs >= 1, f"epochs must be >= 1, got {self.epochs}")
         if self.tensorboard:
             require_tensorboard()
-        _check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
-        _check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
-        _check(self.render_every >= 0, f"render_every must be >= 0 (0: never), got {self.render_every}")
-        _check(self.threads == "auto" or (self.threads.isdigit() and 1 <= int(self.threads) <= MAX_THREADS),
-               f"threads must be auto or a whole number in [1, {MAX_THREADS}], got {self.threads!r}")
-        _check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (
+        check(self.seed >= 0, f"seed must be >= 0, got {self.seed}")
+        check(self.checkpoint_every >= 0, f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        check(self.render_every >= 0, f"render_every must be >= 0 (0: never), got {self.render_every}")
+        check(self.threads == "auto" or (self.threads.isdigit() and 1 <= int(self.threads) <= MAX_THREADS),
+              f"threads must be auto or a whole number in [1, {MAX_THREADS}], got {self.threads!r}")
+        check(self.device.split(":")[0] in DEVICES and (self.device.count(":") == 0 or (
             self.device.startswith("cuda:") and self.device[5:].isdigit())),
             f"device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
-        _check(self.precision in PRECISIONS, f"precision must be fp32 or bf16, got {self.precision!r}")
+        check(self.precision in PRECISIONS, f"precision must be fp32 or bf16, got {self.precision!r}")
         self.task.resolve()
         self.learner = learner_from_config(self.learner)
-        _check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
-        _check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
-               no_fast_update(self.learner.name))
+        check(self.update in UPDATES, f"update must be autograd or fast, got {self.update!r}")
+        check(self.update == "autograd" or self.learner.name in FAST_UPDATE_LEARNERS,
+              no_fast_update(self.learner.name))
         if isinstance(self.schedule, Schedule):
             self.schedule = settle(self.schedule, self.epochs)
         else:

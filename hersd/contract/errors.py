@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import errno
-import shutil
+import os
 from pathlib import Path
 
 FULL_DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT)  # no space left on the device; the user's quota used up
@@ -18,34 +18,54 @@ class DiskFullError(RuntimeError):
     (``needed``, None where unknown) and those free, then what to do (``then``)."""
 
     def __init__(self, path: str | Path, needed: int | None, then: str = "free some and run the same command again"):
-        self.path, self.needed = Path(path), needed
+        self.path, self.needed, self.then = Path(path), needed, then
         free = free_bytes(self.path)
-        shown_free = "" if free is None else f", {_megabytes(free)} free"
-        need = f"needs {_megabytes(needed)}" if needed is not None else "needs more space"
+        shown_free = "" if free is None else f", {_size(free)} free"
+        need = f"needs {_size(needed)}" if needed is not None else "needs more space"
         super().__init__(f"no space left on the device of {self.path}: writing it {need}{shown_free}; {then}")
+
+    def __reduce__(self):  # pickled by its arguments, not its message: it crosses from worker processes
+        return type(self), (self.path, self.needed, self.then)
 
 
 def full_disk(err: BaseException) -> bool:
     """Whether ``err``, or an error it was raised from or while handling (torch wraps a write's OSError in a
-    RuntimeError), is a full disk (:data:`FULL_DISK_ERRNOS`)."""
+    RuntimeError), is a full disk (:data:`FULL_DISK_ERRNOS`, or a :class:`DiskFullError`, which keeps no OSError
+    once it crossed from another process)."""
     seen: set[int] = set()
     while err is not None and id(err) not in seen:
-        if isinstance(err, OSError) and err.errno in FULL_DISK_ERRNOS:
+        if isinstance(err, DiskFullError) or isinstance(err, OSError) and err.errno in FULL_DISK_ERRNOS:
             return True
         seen.add(id(err))
         err = err.__cause__ or err.__context__
     return False
 
 
-def free_bytes(path: Path) -> int | None:
-    """Bytes free to this user on the device of ``path`` (or of its nearest existing folder); None if unknown."""
+def _device(path: Path) -> os.statvfs_result | None:
+    """The file system of ``path`` (or of its nearest existing folder); None if unknown."""
     for folder in (path, *path.parents):
         try:
-            return shutil.disk_usage(folder).free
+            return os.statvfs(folder)
         except OSError:
             continue
     return None
 
 
-def _megabytes(size: int) -> str:
-    return f"{size / 2**20:.1f} MB" if size >= 2**20 / 10 else f"{size} bytes"
+def free_bytes(path: Path) -> int | None:
+    """Bytes free to this user on the device of ``path`` (or of its nearest existing folder); None if unknown."""
+    device = _device(Path(path))
+    return None if device is None else device.f_bavail * device.f_frsize
+
+
+def block_bytes(path: str | Path) -> int | None:
+    """The bytes a new folder takes on the device of ``path``: one block; None if unknown."""
+    device = _device(Path(path))
+    return None if device is None else device.f_bsize
+
+
+def _size(size: int) -> str:
+    """``512 bytes``, ``108.3 KB``, ``12.0 MB``, ``75.3 GB`` (binary units)."""
+    for unit, scale in (("GB", 2**30), ("MB", 2**20), ("KB", 2**10)):
+        if size >= scale:
+            return f"{size / scale:.1f} {unit}"
+    return f"{size} bytes"

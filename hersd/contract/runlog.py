@@ -220,22 +220,26 @@ def encode_log(messages: Iterable[LoggedMessage]) -> bytes:
     return buffer.getvalue()
 
 
-def replace_file(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: a temporary file next to it, fsync, rename, fsync of the folder.
-    A write that fails leaves ``path`` as it was and no temporary file; on a full disk it raises
-    :class:`DiskFullError` (one line: the file, the bytes it needs, those free)."""
-    temporary = path.with_name(path.name + ".tmp")
+def replace_file(path: Path, data: bytes, temporary: Path | None = None, sync: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically: a temporary file next to it (``<name>.tmp`` unless ``temporary`` is
+    given), fsync, rename, fsync of the folder (both fsyncs left out with ``sync=False``, for files rewritten whole
+    by the next command: a report's). A write that fails leaves ``path`` as it was and no temporary file; on a full
+    disk it raises :class:`DiskFullError` (one line: the file, the bytes it needs, those free)."""
+    temporary = temporary or path.with_name(path.name + ".tmp")
     try:
         with open(temporary, "wb") as stream:
             stream.write(data)
             stream.flush()
-            os.fsync(stream.fileno())
+            if sync:
+                os.fsync(stream.fileno())
         os.replace(temporary, path)
     except BaseException as err:
         temporary.unlink(missing_ok=True)
         if full_disk(err):
             raise DiskFullError(path, len(data)) from None
         raise
+    if not sync:
+        return
     folder = os.open(path.parent, os.O_RDONLY)
     try:
         os.fsync(folder)

@@ -77,17 +77,29 @@ def run_identity(config: TrainConfig | dict[str, Any]) -> dict[str, Any]:
     return content
 
 
+def identity_hash(identity: dict[str, Any]) -> str:
+    """8 hex digits of a run's identity (:func:`run_identity`)."""
+    return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:8]
+
+
 def config_hash(config: TrainConfig | dict[str, Any]) -> str:
-    """8 hex digits identifying everything that determines the run's result (:func:`run_identity`)."""
-    return hashlib.sha256(json.dumps(run_identity(config), sort_keys=True).encode()).hexdigest()[:8]
+    """8 hex digits identifying everything that determines the run's result (:func:`run_identity`); a run about to
+    train has it in its :class:`hersd.contract.runspec.RunSpec`, this is for configs read back from logs."""
+    return identity_hash(run_identity(config))
 
 
-def run_dir(cfg: TrainConfig) -> Path:
-    """The run's directory: ``cfg.run_dir`` if set, else derived from the config."""
+def folder_path(cfg: TrainConfig, run_id: str) -> Path:
+    """The directory of the run of ``cfg`` whose hash is ``run_id``: ``cfg.run_dir`` if set, else
+    ``<results_dir>/<task>/<algo>/<schedule tag>/seed<N>-<run_id>`` (``<learner>-<algo>`` for learners but ddpg)."""
     if cfg.run_dir is not None:
         return Path(cfg.run_dir)
     algo = cfg.algo.name if cfg.learner.name == PAPER_LEARNER else f"{learner_key(cfg.learner.name)}-{cfg.algo.name}"
-    return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{config_hash(cfg)}"
+    return Path(cfg.results_dir) / cfg.task.name / algo / cfg.schedule.tag() / f"seed{cfg.seed}-{run_id}"
+
+
+def run_dir(cfg: TrainConfig) -> Path:
+    """The run's directory (:func:`folder_path`), its hash computed anew: for a config read back, not a run to train."""
+    return folder_path(cfg, config_hash(cfg))
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import re
+import signal
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,6 +25,7 @@ from hersd.contract.errors import ConfigError, DiskFullError
 
 if TYPE_CHECKING:
     from hersd.contract.config import TrainConfig
+    from hersd.contract.runspec import RunSpec
 
 GROUPS = ("task", "algo", "schedule", "learner")  # config groups a run selects (conf/<group>/*.yaml)
 HELP_FLAGS = ("-h", "--help")
@@ -201,15 +203,14 @@ def usage(argv: list[str] = ()) -> str:
     ])
 
 
-def dry_run_lines(cfg: TrainConfig) -> list[str]:
+def dry_run_lines(spec: RunSpec) -> list[str]:
     """``--dry-run``: the resolved run: its folder and state (:meth:`RunFolder.state`), its identity (the hash
     of :func:`run_identity`) and every setting as ``key=value``, nested ones flattened with dots."""
     from hersd.contract.config import config_record
-    from hersd.contract.runstore import RunFolder, config_hash, run_dir
+    from hersd.contract.runstore import RunFolder
 
-    directory = run_dir(cfg)
-    lines = [f"run: {directory} ({RunFolder(directory).state()})", f"identity: {config_hash(cfg)}", "settings:"]
-    pending = list(config_record(cfg).items())
+    lines = [f"run: {spec.folder} ({RunFolder(spec.folder).state()})", f"identity: {spec.run_id}", "settings:"]
+    pending = list(config_record(spec.config).items())
     while pending:
         key, value = pending.pop(0)
         if isinstance(value, dict):
@@ -225,28 +226,29 @@ def _fail(message: str, code: int = 2) -> None:
     sys.exit(code)
 
 
-def checked_config(argv: list[str], writes: bool = True) -> TrainConfig:
-    """The run config of a command line, its folders checked (created, writable, no file where the run's folder
-    goes) unless nothing is to be written (``writes`` False: a dry run); bad input ends the command with one line
-    and exit code 2."""
+def checked_run(argv: list[str], writes: bool = True) -> RunSpec:
+    """The resolved run of a command line (:func:`hersd.contract.runspec.resolve`), its folders checked (created,
+    writable, no file where the run's folder goes) unless nothing is to be written (``writes`` False: a dry run);
+    bad input ends the command with one line and exit code 2."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
     from hersd.contract.compose import compose_train, explain_config_error
-    from hersd.contract.runstore import check_run_path, check_writable, run_dir
+    from hersd.contract.runspec import resolve
+    from hersd.contract.runstore import check_run_path, check_writable
 
     try:
-        cfg = compose_train(argv)
-        if writes and cfg.run_dir is None:
-            check_writable(Path(cfg.results_dir))
-            check_run_path(run_dir(cfg), Path(cfg.results_dir))
+        spec = resolve(compose_train(argv))
+        if writes and spec.config.run_dir is None:
+            check_writable(Path(spec.config.results_dir))
+            check_run_path(spec.folder, Path(spec.config.results_dir))
         elif writes:
-            check_writable(Path(cfg.run_dir), "run_dir")
+            check_writable(spec.folder, "run_dir")
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
         _fail(explain_config_error(err))
-    return cfg
+    return spec
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -264,11 +266,12 @@ def main(argv: list[str] | None = None) -> None:
             return
         dry_run = DRY_RUN_FLAG in argv
         argv = [arg for arg in argv if arg != DRY_RUN_FLAG]
-        cfg = checked_config(argv, writes=not dry_run)
+        spec = checked_run(argv, writes=not dry_run)
         if dry_run:
-            print("\n".join(dry_run_lines(cfg)))
+            signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # a listing: a reader gone (``| head``) ends it quietly
+            print("\n".join(dry_run_lines(spec)))
             return
-        from hersd.contract.runstore import RunLockedError, run_dir
+        from hersd.contract.runstore import RunLockedError
         from hersd.contract.schedules import ScheduleRateRaised
         from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
         from hersd.engine.train import NonFiniteLossError, RunStateError, train
@@ -276,8 +279,8 @@ def main(argv: list[str] | None = None) -> None:
         print("hersd-train: interrupted before training began; re-run the same command to start", file=sys.stderr)
         sys.exit(130)
     try:
-        check_machine(cfg.device, cfg.precision)
-        log_path = train(cfg, command=" ".join(["hersd-train", *argv]))
+        check_machine(*spec.machine)
+        log_path = train(spec, command=" ".join(["hersd-train", *argv]))
     except ConfigError as err:
         _fail(str(err))
     except RunLockedError as err:
@@ -287,9 +290,9 @@ def main(argv: list[str] | None = None) -> None:
     except NonFiniteLossError as err:
         _fail(str(err), code=1)
     except ScheduleRateRaised as err:
-        _fail(f"{err}; the finished epochs are kept in {run_dir(cfg)}", code=1)
+        _fail(f"{err}; the finished epochs are kept in {spec.folder}", code=1)
     except KeyboardInterrupt:
-        print(f"hersd-train: interrupted; the finished epochs are kept in {run_dir(cfg)}: re-run the same "
+        print(f"hersd-train: interrupted; the finished epochs are kept in {spec.folder}: re-run the same "
               "command to resume", file=sys.stderr)
         sys.exit(130)
     print(log_path)

@@ -16,6 +16,7 @@ each tried first in a short subprocess: PyOpenGL's platform cannot change once i
 from __future__ import annotations
 
 import functools
+import io
 import os
 import subprocess
 import sys
@@ -28,6 +29,8 @@ import numpy as np
 from PIL import Image
 
 from hersd.contract.config import TaskConfig, TrainConfig
+from hersd.contract.errors import DiskFullError, full_disk
+from hersd.contract.runlog import replace_file
 from hersd.contract.runstore import POLICY_DIR, RunFolder
 from hersd.engine.denormals import denormals_flushed
 from hersd.engine.envs.make import env_spec, make_env, step_success
@@ -49,6 +52,11 @@ GL_PACKAGES = "apt-get install libegl1 libgl1-mesa-dri (EGL) or libosmesa6 (OSMe
 
 class RenderError(RuntimeError):
     """The policy could not be rendered; the message is one line saying why (and what to install)."""
+
+
+class GifDiskFullError(DiskFullError, RenderError):
+    """A GIF its disk had no room for, in one line (the GIF, the bytes it needs, those free): a full disk (exit 2 of
+    ``hersd-render``) and a failed render (one warning line while training, which goes on)."""
 
 
 @dataclass
@@ -194,23 +202,25 @@ def render_frames(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int,
 
 
 def write_gif(frames: np.ndarray, durations: Sequence[int], path: Path) -> int:
-    """Frames (n, H, W, 3) uint8 -> a looping GIF at ``path`` (written whole, then renamed into place; on an
-    OSError, e.g. a full disk, no file is left and the error names ``path``); one palette of PALETTE_COLOURS for
-    every frame. Returns its size in bytes."""
+    """Frames (n, H, W, 3) uint8 -> a looping GIF at ``path`` (encoded in memory, written whole to its
+    :func:`partial_path`, then renamed into place: a write that fails leaves no file; on a full disk it raises
+    :class:`GifDiskFullError`, one line naming ``path`` and the bytes the GIF needs; another OSError names
+    ``path``); one palette of PALETTE_COLOURS for every frame. Returns its size in bytes."""
     sample = frames[:: max(1, len(frames) // 8)]  # the palette from a few frames spread over the episodes
     palette = Image.fromarray(sample.reshape(-1, frames.shape[2], 3)).quantize(
         PALETTE_COLOURS, method=Image.Quantize.FASTOCTREE)  # keeps the small red goal red
     images = [Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE) for frame in frames]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = partial_path(path)
+    encoded = io.BytesIO()
+    images[0].save(encoded, format="GIF", save_all=True, append_images=images[1:], duration=list(durations), loop=0)
+    data = encoded.getvalue()
     try:
-        images[0].save(partial, format="GIF", save_all=True, append_images=images[1:], duration=list(durations),
-                       loop=0)
-        os.replace(partial, path)
-    except OSError as err:
-        partial.unlink(missing_ok=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        replace_file(path, data, temporary=partial_path(path), sync=False)
+    except (OSError, DiskFullError) as err:
+        if full_disk(err):
+            raise GifDiskFullError(path, len(data)) from None
         raise OSError(err.errno, err.strerror or str(err), str(path)) from None
-    return path.stat().st_size
+    return len(data)
 
 
 def render_policy(agent: GoalConditionedLearner, cfg: TrainConfig, epoch: int, path: Path,

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 import torch
 
 from hersd.contract.config import TrainConfig, learner_node, to_train_config
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, DiskFullError
 from hersd.contract.runlog import LOG_NAME, RunLogError, read_run
 from hersd.contract.runstore import CHECKPOINT_NAME, RunFolder
 from hersd.contract.schedules import schedule_from_record
@@ -91,7 +91,8 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``hersd-render RUN_DIR [--epoch K] [--episodes N] [--out GIF]``: exit 0, 2 (bad input) or 1 (no render)."""
+    """``hersd-render RUN_DIR [--epoch K] [--episodes N] [--out GIF]``: exit 0, 2 (bad input, a GIF it cannot
+    write: a full disk is one line naming it and the bytes it needs) or 1 (no render)."""
     parser = _OneLineParser(prog="hersd-render", description="Animate a run's policy from its checkpoint: "
                             "deterministic test episodes into RUN_DIR/policy/epoch_<K>.gif.")
     parser.add_argument("run_dir", type=Path, help="a run directory (holding run.mcap and checkpoint.pt)")
@@ -113,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     epoch = checkpoint["epoch"]
     try:
         animation = render_policy(agent, cfg, epoch, args.out or RunFolder(args.run_dir).animation(epoch), args.episodes)
+    except DiskFullError as err:  # one line: the GIF, the bytes it needs, those free
+        print(f"hersd-render: error: {err}", file=sys.stderr)
+        return 2
     except RenderError as err:
         print(f"hersd-render: error: {err}", file=sys.stderr)
         return 1

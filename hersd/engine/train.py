@@ -34,10 +34,12 @@ from hersd.contract.cores import resolve_threads
 from hersd.engine.resources import machine_info, resolve_device
 from hersd.engine.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.contract.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_records, read_run
-from hersd.contract.runstore import RunFolder, config_hash, keep_aside, remove_if_unused, run_dir
+from hersd.contract.runspec import RunSpec, resolve
+from hersd.contract.runstore import RunFolder, keep_aside, remove_if_unused
 from hersd.contract.tensorboard_events import EVENTS_DIR, RunEvents
 
 EpochCallback = Callable[[dict], None]
+LoggedCallback = Callable[[list], None]  # the records a log already holds, once before training
 
 
 class RunStateError(RuntimeError):
@@ -201,10 +203,13 @@ def evaluate(state: RunState) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(success), np.concatenate(distance)
 
 
-def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
-    """Epoch k of Algorithm 1 -> its log record."""
+def run_epoch(state: RunState, epoch: int, rate: float | None = None) -> dict[str, Any]:
+    """Epoch k of Algorithm 1 -> its log record; ``rate``: eps(k) as the run's spec resolved it
+    (:meth:`hersd.contract.runspec.RunSpec.rate`), None: the schedule's checked rate now."""
     cfg = state.cfg
-    stats = EpochStats(epoch, cfg.schedule.checked_rate(epoch, cfg.epochs, state.train_success))
+    if rate is None:
+        rate = cfg.schedule.checked_rate(epoch, cfg.epochs, state.train_success)
+    stats = EpochStats(epoch, rate)
     if state.prioritizer is not None:  # refit the density on the episodes stored so far (none in epoch 1)
         with stats.timed("mep_fit"):
             state.prioritizer.fit(state.buffer.stored().achieved, state.rng)
@@ -222,26 +227,31 @@ def run_epoch(state: RunState, epoch: int) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- the run
-def train(cfg: TrainConfig, command: str = "", on_epoch: EpochCallback | None = None) -> Path:
-    """Run (or resume, or find complete) the run of ``cfg``; returns the path of its log.
+def train(run: RunSpec | TrainConfig, command: str = "", on_epoch: EpochCallback | None = None,
+          on_logged: LoggedCallback | None = None) -> Path:
+    """Run (or resume, or find complete) the run of ``run`` (its spec; a config is resolved here, once);
+    returns the path of its log.
 
-    ``on_epoch(record)`` is called after each epoch's record is logged (and checkpointed);
-    an exception it raises stops the run there, leaving it resumable.
+    ``on_logged(records)`` is called once, before any epoch is trained, with the records the log already holds
+    and the run keeps (those up to its checkpoint; all of them for a run found complete; none for a new run).
+    ``on_epoch(record)`` is called after each epoch's record is logged (and checkpointed); an exception either
+    raises stops the run there, leaving it resumable.
     """
-    directory = run_dir(cfg)
+    spec = run if isinstance(run, RunSpec) else resolve(run)
+    directory = spec.folder
     created = not directory.exists()
     directory.mkdir(parents=True, exist_ok=True)
     try:
-        return _train_in(directory, cfg, command, on_epoch)
+        return _train_in(spec, command, on_epoch, on_logged)
     except BaseException:
         if created:  # failed before writing anything (e.g. too little memory): leave no empty folders
-            remove_if_unused(directory, up_to=Path(cfg.results_dir))
+            remove_if_unused(directory, up_to=Path(spec.config.results_dir))
         raise
 
 
-def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCallback | None) -> Path:
+def _train_in(spec: RunSpec, command: str, on_epoch: EpochCallback | None, on_logged: LoggedCallback | None) -> Path:
     """:func:`train` in its run directory, under the run's lock."""
-    folder = RunFolder(directory)
+    cfg, folder = spec.config, RunFolder(spec.folder)
     log_path, checkpoint_path = folder.log, folder.checkpoint
     with folder.lock():
         previous = _read_previous_log(cfg, log_path, checkpoint_path)
@@ -249,6 +259,8 @@ def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCa
             if not cfg.keep_checkpoint:  # left by a run killed between its completion marker and the removal
                 checkpoint_path.unlink(missing_ok=True)
             _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), nothing to do")
+            if on_logged is not None:
+                on_logged(previous.epochs.to_dict("records"))
             return log_path
         threads, device = resolve_threads(cfg.threads), resolve_device(cfg.device)
         torch.set_num_threads(threads)
@@ -263,16 +275,19 @@ def _train_in(directory: Path, cfg: TrainConfig, command: str, on_epoch: EpochCa
             if checkpoint is not None:
                 state.load_state_dict(checkpoint)
                 previous.epochs = previous.epochs[previous.epochs["epoch"] <= state.epochs_done]
-            meta = run_metadata(cfg, state, command, threads, device)
-            _run_epochs(cfg, state, RunLogWriter(log_path, meta, previous), checkpoint_path, on_epoch)
+            if on_logged is not None:
+                on_logged([] if previous is None else previous.epochs.to_dict("records"))
+            meta = run_metadata(spec, state, command, threads, device)
+            _run_epochs(spec, state, RunLogWriter(log_path, meta, previous), checkpoint_path, on_epoch)
         finally:
             state.close()
     return log_path
 
 
-def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint_path: Path,
+def _run_epochs(spec: RunSpec, state: RunState, log: RunLogWriter, checkpoint_path: Path,
                 on_epoch: EpochCallback | None) -> None:
     """The epochs left, each logged, checkpointed and reported; then the completion marker."""
+    cfg = spec.config
     _say(cfg, f"run {checkpoint_path.parent} ({f'resuming at epoch {state.epochs_done + 1}' if state.epochs_done else 'new'})")
     bias = BiasEvaluator(cfg.bias, cfg.task, cfg.seed, state.spec.horizon, state.gamma, state.reward,
                          cfg.flush_denormal)
@@ -284,7 +299,7 @@ def _run_epochs(cfg: TrainConfig, state: RunState, log: RunLogWriter, checkpoint
         if owed is not None:  # stopped while rendering it: the checkpoint holds that epoch's policy
             animate(cfg, state, owed, checkpoint_path.parent)
         for epoch in range(state.epochs_done + 1, cfg.epochs + 1):
-            record = run_epoch(state, epoch)
+            record = run_epoch(state, epoch, spec.rate(epoch, state.train_success))
             check_finite(cfg, record)
             if bias.due(epoch):
                 record |= evaluate_bias(cfg, bias, state, epoch)
@@ -401,9 +416,10 @@ def _flush_intra_op_threads(cfg: TrainConfig) -> None:
 
 
 # --------------------------------------------------------------------------- run metadata
-def run_metadata(cfg: TrainConfig, state: RunState, command: str, threads: int, device: torch.device) -> dict:
+def run_metadata(spec: RunSpec, state: RunState, command: str, threads: int, device: torch.device) -> dict:
     """The ``/run/meta`` message of this session (see :mod:`hersd.contract.runlog`)."""
-    return {"run_id": config_hash(cfg), "config": config_record(cfg), "seed": cfg.seed, "versions": _versions(),
+    cfg = spec.config
+    return {"run_id": spec.run_id, "config": config_record(cfg), "seed": cfg.seed, "versions": _versions(),
             "git_commit": _git_commit(), "command": command, "start_time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "resumed_from_epoch": state.epochs_done, "effective": state.effective_totals(),
             "threads": threads, "device": str(device), "machine": machine_info()}

@@ -14,8 +14,6 @@ import os
 import shlex
 import socket
 import time
-from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,9 +21,9 @@ import optuna
 
 from hersd.contract.config import TrainConfig
 from hersd.contract.errors import ConfigError
-from hersd.contract.runlog import read_records
-from hersd.contract.runstore import RunFolder, RunLockedError, run_dir
-from hersd.contract.study import (KIND_ATTR, REWARD_PARAM, RUN_DIRS_ATTR, kind_params, mean_rates, one_line, param_overrides,
+from hersd.contract.runspec import RunSpec, resolve
+from hersd.contract.runstore import RunLockedError
+from hersd.contract.study import (KIND_ATTR, REWARD_PARAM, RUN_DIRS_ATTR, kind_params, one_line, param_overrides,
                                   trial_config)
 from sweeps.search.space import SpaceConfig, space_bounds, whole_number
 from sweeps.search.plan import SearchPlan
@@ -54,11 +52,10 @@ def seed_objective(values: np.ndarray, objective: str) -> float:
     return float(np.mean(values)) if objective == "auc" else float(values[-1])
 
 
-def metric_values(log_path: Path, metric: str, up_to_epoch: int | None = None) -> np.ndarray:
-    """The metric of epochs 1..up_to_epoch (all if None) from a run's log -> shape (epochs,), null as NaN."""
-    records = read_records(log_path).records
-    return np.array([np.nan if record[metric] is None else record[metric] for record in records
-                     if up_to_epoch is None or record["epoch"] <= up_to_epoch], dtype=float)
+def metric_value(record: dict[str, Any], metric: str) -> float:
+    """One epoch's metric from its record (as training hands it over); null (or NaN) as NaN."""
+    value = record[metric]
+    return np.nan if value is None else float(value)
 
 
 class TrialProgress:
@@ -120,27 +117,29 @@ def run_command(plan: SearchPlan, trial_number: int, params: dict[str, Any], cfg
 
 
 def train_seed(trial: optuna.Trial, plan: SearchPlan, progress: TrialProgress, params: dict[str, Any],
-               cfg: TrainConfig, seed_index: int) -> None:
-    """Train (or resume, or find complete) one run of the trial in its folder ``cfg.run_dir``, reporting
-    each epoch from the record training hands over; record its objective."""
+               spec: RunSpec, seed_index: int) -> None:
+    """Train (or resume, or find complete) one run of the trial, reporting each epoch from the record training
+    hands over (a resumed or complete run's earlier epochs too, once, as training read them): the log is not read
+    here; record its objective."""
     from hersd.engine.train import train  # torch and MuJoCo: only in the processes that train
 
     metric, epochs = plan.search.metric, plan.epochs
-    log_path = RunFolder(Path(cfg.run_dir)).log
     values: list[float] = []  # the run's metric of epochs 1..k so far, k = the last record's epoch
+
+    def on_logged(records: list[dict]) -> None:
+        """The epochs the log already holds (a resumed or complete run), reported with the next epoch."""
+        values.extend(metric_value(record, metric) for record in records)
 
     def on_epoch(record: dict) -> None:
         """After each logged epoch: heartbeat, report the new step(s), maybe prune."""
         _heartbeat(trial)
-        if not values and record["epoch"] > 1:  # a resumed run: the epochs before it, once, from its log
-            values.extend(metric_values(log_path, metric, record["epoch"] - 1))
-        values.append(np.nan if record[metric] is None else record[metric])
+        values.append(metric_value(record, metric))
         progress.update(seed_index, np.array(values, dtype=float), record["epoch"] < epochs)
 
-    train(cfg, command=run_command(plan, trial.number, params, cfg), on_epoch=on_epoch)
-    logged = metric_values(log_path, metric)  # also a run found complete, which trained no epoch here
-    if len(logged) != epochs:
-        raise RuntimeError(f"{log_path} holds {len(logged)} of {epochs} epochs after training")
+    train(spec, command=run_command(plan, trial.number, params, spec.config), on_epoch=on_epoch, on_logged=on_logged)
+    if len(values) != epochs:
+        raise RuntimeError(f"{spec.folder} holds {len(values)} of {epochs} epochs after training")
+    logged = np.array(values, dtype=float)
     progress.update(seed_index, logged, may_prune=seed_index < plan.search.seeds - 1)
     progress.finish_seed(logged)
 
@@ -165,17 +164,16 @@ def skip_unneeded(trial: optuna.Trial, plan: SearchPlan) -> None:
     raise optuna.TrialPruned(f"skipped: {reason}")
 
 
-def trial_configs(trial: optuna.Trial, plan: SearchPlan, params: dict[str, Any], threads: str) -> list[TrainConfig]:
-    """The trial's runs, one per seed, each with its folder; a draw that makes no valid schedule (a rate outside
-    [0, 1] the start check's grid missed) prunes the trial, its reason naming the draw."""
+def trial_runs(trial: optuna.Trial, plan: SearchPlan, params: dict[str, Any], threads: str) -> list[RunSpec]:
+    """The trial's runs, one per seed, each resolved once (its config validated once); a draw that makes no valid
+    schedule (a rate outside [0, 1] the start check's grid missed) prunes the trial, its reason naming the draw."""
     try:
-        configs = [trial_config(plan.base, params, plan.search.first_seed + index, threads)
-                   for index in range(plan.search.seeds)]
+        return [resolve(trial_config(plan.base, params, plan.search.first_seed + index, threads))
+                for index in range(plan.search.seeds)]
     except ConfigError as err:
         reason = f"no schedule at {shown_params(params)}: {err}"
         trial.set_user_attr(PRUNED_REASON_ATTR, reason)
         raise optuna.TrialPruned(reason) from None
-    return [replace(cfg, run_dir=str(run_dir(cfg))) for cfg in configs]  # folders computed once: training takes them
 
 
 def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: list[str] | None = None) -> float:
@@ -185,17 +183,17 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
     skip_unneeded(trial, plan)
     params = suggest_params(trial, plan.search.space)
     trial.set_user_attr(KIND_ATTR, params["kind"])
-    configs = trial_configs(trial, plan, params, threads)
-    mu_exact, mu_approx = mean_rates(params, plan.epochs)
-    trial.set_user_attr("mu_eps", mu_exact)
-    trial.set_user_attr("mu_eps_approx", mu_approx)
+    specs = trial_runs(trial, plan, params, threads)
+    mu_exact, mu_approx = specs[0].mean_rate(), specs[0].config.schedule.limit_mean_rate()
+    trial.set_user_attr("mu_eps", float("nan") if mu_exact is None else mu_exact)
+    trial.set_user_attr("mu_eps_approx", float("nan") if mu_approx is None else mu_approx)
     progress = TrialProgress(trial, plan.search.objective, plan.epochs)
     run_dirs: list[str] = []
     try:
-        for seed_index, cfg in enumerate(configs):
-            run_dirs.append(cfg.run_dir)
+        for seed_index, spec in enumerate(specs):
+            run_dirs.append(str(spec.folder))
             trial.set_user_attr(RUN_DIRS_ATTR, run_dirs)  # before training: failed and pruned trials have it too
-            train_seed(trial, plan, progress, params, cfg, seed_index)
+            train_seed(trial, plan, progress, params, spec, seed_index)
     except KeyboardInterrupt:
         trial.set_user_attr("interrupted", True)
         raise
@@ -207,7 +205,7 @@ def objective(trial: optuna.Trial, plan: SearchPlan, threads: str, refusals: lis
         trial.study.stop()
         if refusals is not None:
             refusals.append(str(err))
-        return float("nan")  # Optuna records the trial FAIL in one warning line
+        return float("nan")  # Optuna records the trial FAIL (its line dropped: sweeps.search.workers.OneLineFailures)
     except Exception as err:
         trial.set_user_attr(ERROR_ATTR, one_line(f"{type(err).__name__}: {err}"))  # the command names the first
         raise

@@ -20,7 +20,9 @@ from hersd.contract.config import ScheduleConfig, TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
+from hersd.contract.runspec import resolve
 from hersd.contract.schedules import settle
+from hersd.contract.schedules.base import check_rates
 from hersd.contract.study import (REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params,
                                   schedule_config, trial_config)
 from sweeps.search.storage import resolve_storage
@@ -94,7 +96,7 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
     for where, params in probes:
         for seed in (search.first_seed, last_seed):
             try:
-                trial_config(base, params, seed)
+                resolve(trial_config(base, params, seed))
             except ConfigError as err:
                 raise ConfigError(f"{where}: {err}") from None
     for kind in kinds:
@@ -106,7 +108,7 @@ def check_box(kind: str, search: SearchConfig, epochs: int) -> None:
     ``kind`` is no schedule of ``epochs`` epochs, e.g. a rate outside [0, 1]: a trial would draw near it."""
     for point in box_points(search.space, kind):
         try:
-            settle(schedule_config({"kind": kind, **point}), epochs)
+            check_rates(settle(schedule_config({"kind": kind, **point}), epochs), epochs)
         except ConfigError as err:
             shown = ", ".join(f"{name}={value:.6g}" for name, value in point.items())
             raise ConfigError(f"search.space: {kind} at {shown}, within the searched ranges: {err}; narrow "

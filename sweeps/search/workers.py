@@ -10,11 +10,8 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
-import os
 import signal
 import sys
-import threading
-import time
 from dataclasses import asdict
 from functools import partial
 from multiprocessing import resource_tracker
@@ -25,7 +22,7 @@ import optuna
 
 from hersd.contract.compose import CONFIG_MODULE
 from hersd.contract.errors import ConfigError
-from sweeps.launchers import check_slurm as check_slurm_answers
+from sweeps.launchers import check_slurm as check_slurm_answers, end_with, main_process
 from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
 from sweeps.search.objective import objective
@@ -34,13 +31,6 @@ from sweeps.search.study import make_pruner, make_sampler, room_for_trial
 
 SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
 SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
-
-
-def _exit_when_orphaned(parent_pid: int) -> None:
-    """A local worker ends when the search process that started it is gone (e.g. kill -9)."""
-    while os.getppid() == parent_pid:
-        time.sleep(2.0)
-    os._exit(1)
 
 
 class QuietInterrupt(logging.Filter):
@@ -59,11 +49,17 @@ class QuietInterrupt(logging.Filter):
 
 class OneLineFailures(logging.Filter):
     """Optuna's lines on a failed trial made one: the error without its traceback, the "failed with value None"
-    line dropped (the trial's user attribute ``error`` keeps the error; the command names the first)."""
+    line dropped (the trial's user attribute ``error`` keeps the error; the command names the first); nothing of a
+    trial the training layer refused (its objective NaN, ``refusals`` not empty: the command's line says why)."""
+
+    def __init__(self, refusals: list[str]) -> None:
+        super().__init__()
+        self.refusals = refusals
 
     def filter(self, record: logging.LogRecord) -> bool:
         message = record.getMessage()
-        if message.startswith("Trial ") and " failed with value " in message:
+        refused = bool(self.refusals) and " failed " in message
+        if message.startswith("Trial ") and (" failed with value " in message or refused):
             return False
         if record.exc_info and not isinstance(record.exc_info[1], KeyboardInterrupt):
             record.msg, record.args = " ".join(message.split()), None
@@ -81,19 +77,22 @@ def interrupted(err: BaseException | None) -> bool:
     return False
 
 
-def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid: int | None = None) -> None:
+def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, search_process: str | None = None) -> None:
     """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores. A local
-    worker process (``parent_pid`` given) starts with SIGINT blocked (:func:`run_local`) and takes it here, where
+    worker process (``search_process`` given: the search's main process, :func:`sweeps.launchers.main_process`) ends
+    within a second of that process, however it ends (:func:`sweeps.launchers.end_with`: its trial, left RUNNING, is
+    lost and re-run by the next command); it starts with SIGINT blocked (:func:`run_local`) and takes it here, where
     a Ctrl-C ends it with exit code 130 and no traceback."""
-    if parent_pid is not None:
-        threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
-    filters, handlers = (QuietInterrupt(), OneLineFailures()), logging.getLogger("optuna").handlers
+    local = search_process is not None
+    if local:
+        end_with(search_process, "hersd-search", "its trial is re-run when the same command runs again")
+    refusals: list[str] = []
+    filters, handlers = (QuietInterrupt(), OneLineFailures(refusals)), logging.getLogger("optuna").handlers
     for handler in handlers:
         for log_filter in filters:
             handler.addFilter(log_filter)
-    refusals: list[str] = []
     try:
-        if parent_pid is not None:
+        if local:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C while it started arrives now
         study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
                                   sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
@@ -105,14 +104,14 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, parent_pid
     except BaseException as err:
         if not interrupted(err):
             raise
-        if parent_pid is None:  # in the search's own process (or a SLURM job): let it report it
+        if not local:  # in the search's own process (or a SLURM job): let it report it
             raise KeyboardInterrupt from None
         sys.exit(130)  # a worker process: the trial is recorded as interrupted (or re-run as lost); no traceback
     finally:
         for handler in handlers:
             for log_filter in filters:
                 handler.removeFilter(log_filter)
-    if refusals and parent_pid is None:
+    if refusals and not local:
         raise ConfigError(refusals[0])
     if refusals:
         print(f"hersd-search: error: {refusals[0]}", file=sys.stderr, flush=True)
@@ -132,7 +131,7 @@ def run_local(plan: SearchPlan, shares: list[int]) -> list[int]:
         return [0]
     context = multiprocessing.get_context("spawn")  # no fork: torch, MuJoCo and open DB connections
     workers = [context.Process(target=run_worker, name=f"hersd-search-{i}",
-                               args=(plan, share, len(shares), os.getpid()))
+                               args=(plan, share, len(shares), main_process()))
                for i, share in enumerate(shares)]
     # SIGINT blocked while they start: a worker is never half started, and each inherits the block (across exec)
     # until run_worker takes the signal, so a Ctrl-C in its start-up is no traceback; a blocked one waits. The

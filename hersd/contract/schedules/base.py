@@ -6,8 +6,8 @@ range checks (one-line :class:`ConfigError` naming the field) and the search's d
 Its methods give the rate of epoch k of K, the exact mean rate (None when it adapts to the
 run), the folder tag and the report's label (both by default from the class name and its settings),
 the kind it equals (:meth:`Schedule.equivalent`) and the record logs keep (the run's identity).
-Every rate must lie in [0, 1]: a fixed schedule's are checked when its config is built
-(:func:`settle`, its first CHECKED_UP_FRONT epochs), every schedule's at each epoch
+Every rate must lie in [0, 1]: a fixed schedule's are checked when its run is resolved
+(:func:`check_rates`, its first CHECKED_UP_FRONT epochs, by :func:`hersd.contract.runspec.resolve`), every other at its epoch
 (:meth:`Schedule.checked_rate`), one :class:`ScheduleRateError` line naming the epoch. Imports neither torch nor the config: every layer can use it.
 """
 
@@ -200,16 +200,16 @@ def shown_value(value: Any) -> str:
 CHECKED_UP_FRONT = 100_000  # a fixed schedule's epochs checked before any work; later ones at their epoch
 
 
-def check_rates(schedule: Schedule, total_epochs: int) -> None:
-    """ScheduleRateError (one line) unless a fixed schedule's rate of every epoch 1..total_epochs is in [0, 1]
-    (or if computing one raises); past CHECKED_UP_FRONT epochs, training checks each at its epoch."""
+def check_rates(schedule: Schedule, total_epochs: int) -> tuple[float, ...] | None:
+    """The rates of a fixed schedule's epochs 1..min(total_epochs, CHECKED_UP_FRONT), shape (K,), each checked in
+    [0, 1] (ScheduleRateError, one line, for one outside or one that raises); None for an adaptive schedule, whose
+    rate training checks at each epoch, as it does a longer run's epochs past CHECKED_UP_FRONT."""
     if schedule.adaptive:
-        return
-    for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1):
-        try:
-            schedule.checked_rate(k, total_epochs)
-        except ScheduleRateRaised as err:  # before any work: bad input
-            raise ScheduleRateError(str(err)) from None
+        return None
+    try:
+        return tuple(schedule.checked_rate(k, total_epochs) for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1))
+    except ScheduleRateRaised as err:  # before any work: bad input
+        raise ScheduleRateError(str(err)) from None
 
 
 def check_param(item: dataclasses.Field, value: Any) -> None:

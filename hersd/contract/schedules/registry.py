@@ -9,7 +9,7 @@ from typing import Any, Mapping
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.plugins import class_at, entry_point_class, entry_point_names
-from hersd.contract.schedules.base import Schedule, check_rates, kind_name
+from hersd.contract.schedules.base import Schedule, kind_name
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.cosine import Cosine
 from hersd.contract.schedules.exponential import Exponential
@@ -99,8 +99,8 @@ def build(cls: type[Schedule], settings: Mapping[str, Any], name: str) -> Schedu
 
 def settle(schedule: Schedule, total_epochs: int) -> Schedule:
     """The schedule a run of total_epochs uses: the kind it equals (:meth:`Schedule.equivalent`), resolved for
-    total_epochs, its tag checked (:func:`check_tag`), its rates checked in [0, 1] if it does not adapt
-    (ScheduleRateError, one line)."""
+    total_epochs, its tag checked (:func:`check_tag`); its rates are checked when its run is resolved
+    (:func:`hersd.contract.schedules.base.check_rates`)."""
     schedule = schedule.equivalent()
     try:
         schedule.resolve(total_epochs)
@@ -109,7 +109,6 @@ def settle(schedule: Schedule, total_epochs: int) -> Schedule:
     except Exception as err:  # noqa: BLE001 - a user's resolve: one line naming it, before any work
         raise ConfigError(f"schedule {kind_name(type(schedule))}: resolve() raised {raised(err)}") from None
     check_tag(schedule)
-    check_rates(schedule, total_epochs)
     return schedule
 
 

@@ -1,7 +1,9 @@
-"""The learners (docs/LEARNERS.md): one module per learner, each a class that declares what the run
-asks of it (:mod:`hersd.engine.learners.base`). Importing this package imports every module in it, so every
-learner class is registered under its ``NAME``: :func:`learner_class` finds it by ``learner=``, as it finds
-an entry point's (group ``hersd.learners``) or a class by its path (``learner._target_``).
+"""The learners (docs/LEARNERS.md): one module per learner, each a class that declares what the run asks of it
+(:mod:`hersd.engine.learners.base`), bound to its card, the module of the same name in :mod:`hersd.contract.learners`
+(its name, its settings and whether it has a fast update, which the config reads without torch). Importing this
+package imports every module in it, so every learner class is registered under its ``NAME``: :func:`learner_class`
+finds it by ``learner=``, as it finds an entry point's (group ``hersd.learners``) or a class by its path
+(``learner._target_``).
 """
 
 from __future__ import annotations

@@ -8,6 +8,8 @@ names it (:mod:`hersd.engine.run_state` and :mod:`hersd.engine.train` look it up
 - ``NAME``: the value of ``learner.name`` that selects it; defining it registers the class;
 - ``SETTINGS``: its settings dataclass; the config holds one object of it, the one ``build`` reads and
   the run's identity hashes (:class:`hersd.contract.config.LearnerConfig`);
+- a class of this package takes both from its card (:mod:`hersd.contract.learners`, which the config reads
+  without torch): ``class TD3(DDPG, card=CARD)``;
 - :meth:`~GoalConditionedLearner.build`: the learner of a run from its config, env spec, discount,
   target range and device;
 - :meth:`~GoalConditionedLearner.networks`, ``CRITICS``, ``TARGETS``: its networks (name -> input
@@ -40,6 +42,7 @@ from torch import nn
 from hersd.contract import learner_registry as registry
 from hersd.contract.config import DDPGConfig, TrainConfig
 from hersd.contract.errors import ConfigError
+from hersd.contract.learners import LearnerCard
 from hersd.engine.replay.buffer import TransitionBatch
 from hersd.engine.resources import check_precision
 
@@ -151,7 +154,7 @@ class GoalConditionedLearner:
     """The input normalisers, networks and plumbing of a learner. A subclass sets the class facts below,
     builds its optimisers after calling this constructor and defines ``build``, ``act`` and ``update``."""
 
-    NAME: ClassVar[str]  # learner=NAME selects the class; set in a class body, it registers the class
+    NAME: ClassVar[str]  # learner=NAME selects the class; set in its body or by its card, it registers the class
     # Its settings, learner.<name>.*: a dataclass whose fields are the settings (range checks in __post_init__,
     # ConfigError), or None. The config holds one object of it (cfg.learner.settings): the one build reads, the
     # one the run's identity hashes. A subclass inherits it, under its own name.
@@ -163,8 +166,15 @@ class GoalConditionedLearner:
     UPDATE_PASSES: ClassVar[int] = 0  # network passes of one update on a minibatch (sizes its activations)
     target_range: Optional[tuple[float, float]] = None  # the clip of the critics' target; None: not clipped
 
-    def __init_subclass__(cls, **kwargs) -> None:
+    def __init_subclass__(cls, card: Optional[LearnerCard] = None, **kwargs) -> None:
+        """A class given its ``card`` (a learner of this package: ``class TD3(DDPG, card=CARD)``) takes its NAME and
+        SETTINGS from it and declares neither itself (TypeError); a class with a NAME is registered under it."""
         super().__init_subclass__(**kwargs)
+        if card is not None:
+            if {"NAME", "SETTINGS"} & set(cls.__dict__):
+                raise TypeError(f"{cls.__name__} takes its NAME and SETTINGS from its card ({card.name}): "
+                                "declare them there only")
+            cls.NAME, cls.SETTINGS = card.name, card.settings
         if "NAME" in cls.__dict__:
             if cls.NAME in registry.LEARNERS:
                 raise TypeError(f"two learners named {cls.NAME!r}: {registry.LEARNERS[cls.NAME].__name__} and "

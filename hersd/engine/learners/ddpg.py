@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from hersd.contract.config import DDPGConfig, TrainConfig
+from hersd.contract.learners.ddpg import CARD
 from hersd.engine.learners.base import GoalConditionedLearner, UpdateStats, frozen_q
 from hersd.engine.replay.buffer import TransitionBatch
 
@@ -41,10 +42,9 @@ def noisy_action(action: np.ndarray, cfg: DDPGConfig, max_action: float, rng: np
     return np.where(take_random, random_action, action)
 
 
-class DDPG(GoalConditionedLearner):
+class DDPG(GoalConditionedLearner, card=CARD):
     """A deterministic actor, its critic(s), their targets and one optimiser, on the shared input normalisers."""
 
-    NAME = "ddpg"
     TARGETS = ("actor", "critic")
     PARTS = ("actor", "critic", "actor_target", "critic_target", "optimizer", "obs_norm", "goal_norm")
     LOSS_SETTINGS = "ddpg.action_l2"

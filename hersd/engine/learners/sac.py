@@ -25,7 +25,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from hersd.contract.config import DDPGConfig, SACConfig, TrainConfig
+from hersd.contract.config import DDPGConfig, TrainConfig
+from hersd.contract.learners.sac import CARD, SACConfig
 from hersd.engine.learners.base import TWIN_CRITICS, GoalConditionedLearner, UpdateStats, frozen_q
 from hersd.engine.replay.buffer import TransitionBatch
 
@@ -35,11 +36,9 @@ if TYPE_CHECKING:
 LOG_STD_RANGE = (-20.0, 2.0)
 
 
-class SAC(GoalConditionedLearner):
+class SAC(GoalConditionedLearner, card=CARD):
     """A squashed-Gaussian actor, twin critics and a learnt temperature, on the shared input normalisers."""
 
-    NAME = "sac"
-    SETTINGS = SACConfig
     CRITICS = TWIN_CRITICS
     TARGETS = CRITICS  # no actor target
     PARTS = ("actor", "critic", "critic2", "critic_target", "critic2_target", "optimizer", "alpha_optimizer",

@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from hersd.contract.config import DDPGConfig, TD3Config, TrainConfig
+from hersd.contract.config import DDPGConfig, TrainConfig
+from hersd.contract.learners.td3 import CARD, TD3Config
 from hersd.engine.learners.base import TWIN_CRITICS
 from hersd.engine.learners.ddpg import DDPG
 
@@ -28,11 +29,9 @@ if TYPE_CHECKING:
     from hersd.engine.envs.make import EnvSpec
 
 
-class TD3(DDPG):
+class TD3(DDPG, card=CARD):
     """DDPG with twin critics, smoothed target actions and delayed actor steps."""
 
-    NAME = "td3"
-    SETTINGS = TD3Config
     CRITICS = TWIN_CRITICS
     TARGETS = ("actor", "critic", "critic2")
     PARTS = DDPG.PARTS + ("critic2", "critic2_target")  # + "counters" (the delay's phase), below
