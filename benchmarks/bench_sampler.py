@@ -12,17 +12,16 @@ Side by side in one process, the reward function the sampler is given:
 (d) for scale: the env's own ``compute_reward`` called per row (what an env that takes one pair
     at a time costs, hersd.engine.envs.goal_envs._env_reward's fallback).
 
-The variants alternate within each repeat (each repeat starting with the next one), so load
-from other processes hits them alike; printed: the median and the fastest of the repeats, and
-each variant's median over (a)'s.
+The variants run in interleaved rounds (``benchmarks/rounds.py``: each round runs every variant once, after
+a warm-up round), so load from other processes hits them alike; printed: the CPU, each variant's median
+(min-max) over the rounds and its ratio to (a) as the median of per-round ratios.
 
-Usage: python benchmarks/bench_sampler.py [--samples 2000] [--repeats 7]
+Usage: python benchmarks/bench_sampler.py [--samples 2000] [--rounds 7]
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 from functools import partial
 from typing import Callable
@@ -34,6 +33,7 @@ import hersd.engine.envs.make  # noqa: F401  (registers the gymnasium-robotics e
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.contract.tasks import TASKS
 from hersd.engine.replay.buffer import Episodes, sample_transitions
+from rounds import cpu_line, faster_line, interleaved, spread
 
 EPISODES, HORIZON, OBS, GOAL, ACTION = 20_000, 50, 25, 3, 4  # 1e6 transitions of FetchPush
 BATCH, RELABEL_RATE = 256, 0.8
@@ -66,7 +66,7 @@ def microseconds_per_sample(episodes: Episodes, reward: Callable, samples: int) 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=2000, help="minibatches per timing")
-    parser.add_argument("--repeats", type=int, default=7, help="timings per variant (alternating)")
+    parser.add_argument("--rounds", type=int, default=7, help="interleaved rounds (after one warm-up round)")
     args = parser.parse_args()
     env = gym.make(TASKS["push"].env_id).unwrapped
     threshold = float(env.distance_threshold)
@@ -82,19 +82,19 @@ def main() -> None:
     for reward in variants.values():  # every variant gives the same minibatch
         other = sample_transitions(episodes, BATCH, RELABEL_RATE, np.random.default_rng(2), reward)
         assert np.array_equal(other.reward, check.reward) and len(np.unique(check.reward)) == 2
-    timings: dict[str, list[float]] = {name: [] for name in variants}
-    names = list(variants)
-    for repeat in range(args.repeats):  # each repeat starts with the next variant: no variant always goes first
-        for name in names[repeat % len(names):] + names[:repeat % len(names)]:
-            samples = args.samples if "per row" not in name else max(1, args.samples // 20)
-            timings[name].append(microseconds_per_sample(episodes, variants[name], samples))
-    base = statistics.median(timings[BEFORE])
-    print(f"HER minibatch of {BATCH} from {EPISODES} episodes x T={HORIZON}, relabel rate {RELABEL_RATE}; "
-          f"{args.repeats} repeats")
-    for name, values in timings.items():
-        median = statistics.median(values)
-        print(f"{name:<44} median {median:8.1f} us  fastest {min(values):8.1f} us  x{median / base:.3f}")
 
+    def timed(name: str) -> dict[str, float]:
+        samples = args.samples if "per row" not in name else max(1, args.samples // 20)
+        return {"us": microseconds_per_sample(episodes, variants[name], samples)}
+
+    kept = interleaved({name: partial(timed, name) for name in variants}, args.rounds)
+    print(cpu_line())
+    print(f"HER minibatch of {BATCH} from {EPISODES} episodes x T={HORIZON}, relabel rate {RELABEL_RATE}; "
+          f"{args.rounds} interleaved rounds; median (min-max) over the rounds")
+    for name in variants:
+        print(f"{name:<44} {spread(kept[name]['us'], digits=1)} us")
+    for name in list(variants)[1:]:
+        print(faster_line(f"ratio: {name}", kept[name]["us"], kept[BEFORE]["us"], "(a)"))
 
 if __name__ == "__main__":
     main()

@@ -4,7 +4,7 @@ path alike; what they print is each path's min / median / max over the rounds an
 per-round ratios, under a line naming the CPU (model name, family, model: two VMs sold under one name can be
 different CPUs, and a speed figure belongs to one of them).
 
-Used by ``bench_cycle.py``, ``bench_precision.py`` and ``bench_update.py`` (run as scripts: this folder is on
+Used by ``bench_cycle.py``, ``bench_precision.py``, ``bench_update.py`` and ``bench_sampler.py`` (run as scripts: this folder is on
 their import path).
 """
 
