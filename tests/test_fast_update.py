@@ -183,6 +183,33 @@ def test_bf16_runs_the_hidden_products_on_bf16_copies_refreshed_after_each_move(
     assert rounded_alike()
 
 
+@torch.no_grad()
+def test_bf16_relu_and_its_mask_on_int16_bits_are_bf16s_own(bf16_cpu):
+    """A forward and backward of the bf16 hand passes give the numbers of bf16 ``relu_`` and
+    ``threshold_backward`` (plain bf16 kernels, redone here), negative zeros and values near 0 included, and the
+    bias gradients float32 sums of the bf16 gradient."""
+    _, fast = learner_pair("ddpg", "push", ("fp32", "bf16"))
+    hand = fast.hand["critic"]
+    inputs = torch.randn(64, hand.weights[0].shape[1])
+    inputs[0, :] = -0.0
+    output = hand.forward(inputs).clone()
+    h = inputs.to(torch.bfloat16)
+    activations = []
+    for weight, bias in zip(hand.low_weights, hand.low_biases):
+        h = torch.addmm(bias, h, weight.t()).relu_()
+        activations.append(h)
+    assert all(torch.equal(a.view(torch.int16), b.view(torch.int16)) for a, b in zip(hand.hidden, activations))
+    assert torch.equal(output, torch.addmm(hand.biases[-1], h.float(), hand.weights[-1].t()))
+    assert any(bool((a == 0).any()) for a in activations) and any(bool((a > 0).any()) for a in activations)
+    grad_output = torch.randn(64, 1)
+    hand.backward(grad_output, 64)
+    g = torch.mm(grad_output, hand.weights[-1]).to(torch.bfloat16)
+    g = torch.ops.aten.threshold_backward(g, activations[-1], 0)
+    assert torch.equal(hand.biases[-2].grad, g.float().sum(0))
+    g = torch.ops.aten.threshold_backward(torch.mm(g, hand.low_weights[-1]), activations[-2], 0)
+    assert torch.equal(hand.biases[-3].grad, g.float().sum(0))
+
+
 def test_a_cpu_without_bf16_instructions_refuses_the_fast_bf16_update_in_one_line(monkeypatch):
     monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
     with pytest.raises(ConfigError, match="^precision=bf16: this CPU has no bf16 instructions.*use precision=fp32$"):
