@@ -292,23 +292,26 @@ class FastUpdate:
     def _critics_backward(self, critic_rows: torch.Tensor, target: torch.Tensor, actor_due: bool
                           ) -> tuple[float, torch.Tensor, tuple[float, Optional[torch.Tensor]]]:
         """Each critic's gradient of its term of sum_i mean (Q_i(s, a) - target)^2 into its ``.grad``, from the
-        upper B rows of ``critic_rows``. With the actor due, the first critic then runs over the lower rows,
-        (s, pi(s)): -mean Q_1(s, pi) and its gradient w.r.t. pi (B, A), the critic's gradients left as they are.
+        upper B rows of ``critic_rows``. With the actor due, the first critic's passes take all 2B rows at once
+        (one product of 2B rows runs faster than two of B), the lower ones (s, pi(s)) giving -mean Q_1(s, pi) and
+        its gradient w.r.t. pi (B, A), the critic's gradients from the upper rows only.
         Returns (the critic loss, Q_1(s, a) (B, 1), (-mean Q_1(s, pi), that gradient)) (0.0, None if not due)."""
         rows = target.shape[0]
-        grad = self._input_buffers[rows][2][:rows]
+        grad = self._input_buffers[rows][2]
         losses, q, policy_q = [], None, (0.0, None)
         for index, critic in enumerate(self.CRITICS):
-            hand = self.hand[critic]
-            value = hand.forward(critic_rows[:rows])
-            q = value.clone() if index == 0 else q  # the buffer is overwritten by the (s, pi) pass
-            diff = torch.sub(value, target)
+            hand, both = self.hand[critic], index == 0 and actor_due
+            value = hand.forward(critic_rows if both else critic_rows[:rows])
+            q = value[:rows].clone() if index == 0 else q
+            diff = torch.sub(value[:rows], target)
             losses.append(torch.dot(diff.view(-1), diff.view(-1)))
-            hand.backward(torch.mul(diff, 2.0 / rows, out=grad), rows)
-            if index == 0 and actor_due:  # -mean Q_1(s, pi) and its gradient w.r.t. pi, the critic's untouched
-                policy_loss = -hand.forward(critic_rows[rows:]).mean().item()
-                policy_q = (policy_loss, hand.backward(grad.fill_(-1.0 / rows), 0, slice(None),
-                                                       slice(self.actor[0].in_features, None)))
+            torch.mul(diff, 2.0 / rows, out=grad[:rows])
+            if not both:
+                hand.backward(grad[:rows], rows)
+                continue
+            policy_loss = -value[rows:].mean().item()
+            grad[rows:].fill_(-1.0 / rows)
+            policy_q = (policy_loss, hand.backward(grad, rows, slice(rows, None), slice(self.actor[0].in_features, None)))
         return torch.stack(losses).sum().item() / rows, q, policy_q
 
     def _actor_backward(self, pi: torch.Tensor, policy_loss: float, dpi: torch.Tensor) -> float:
