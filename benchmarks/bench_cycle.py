@@ -7,11 +7,13 @@ ratio's median of per-round ratios:
 
 (a) idealised floor: raw ``mujoco.mj_step`` calls of one cycle (2 x 50 x 20 substeps, best of 3) plus the
     update's matrix-product FLOPs at this machine's 256x256x256 matmul rate, fp32 and (on a CPU with bf16
-    instructions) bf16 (not reachable with these layer shapes: inputs of 28-32 columns, outputs of 1 and 4);
+    instructions) bf16, the faster of ``torch.mm``'s and oneDNN's (torch's float32 ``mm`` is MKL's, which on
+    AMD CPUs runs its AVX2 code) (not reachable with these layer shapes: inputs of 28-32 columns, outputs of 1
+    and 4);
 (b) practical floor: the same raw physics plus 40 updates of a minimal plain-PyTorch DDPG (``nn.Sequential``
     nets of the same sizes, two Adams, the textbook critic-then-actor step) on batches already in memory;
 (c) hersd's own ``collect`` + ``update`` steps (hersd/engine/train.py) at 1 thread: the default (fp32
-    autograd), ``update=fast`` (fp32, the networks' passes by hand: hersd/engine/learners/fast.py),
+    autograd), ``update=fast`` (fp32, the networks' passes by hand, oneDNN products: hersd/engine/learners/fast.py),
     ``precision=bf16`` (bf16 autocast over the autograd update) and ``precision=bf16 update=fast`` (the hand
     passes on bf16 weight copies), the bf16 ones on a CPU with bf16 instructions only (hersd refuses them
     elsewhere); per cycle and per update (sampling its minibatch + one learner update); the fp32 paths again
@@ -85,27 +87,35 @@ def update_flops(cfg: DDPGConfig, obs_dim: int, goal_dim: int, action_dim: int) 
     return targets + critic_step + actor_step
 
 
-def matmul_flops_per_second(dtype: torch.dtype, size: int = 256, repeats: int = 500) -> float:
-    """FLOP/s of a size x size x size product in ``dtype`` at the current thread count (after 50 warm-ups)."""
+def onednn_mm(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """a @ b by oneDNN's matmul, as ``update=fast`` runs its hidden layers (hersd/engine/learners/fast.py)."""
+    return torch.ops.mkldnn._linear_pointwise(a, b.t(), None, "none", [], "")
+
+
+def matmul_flops_per_second(product: Callable, dtype: torch.dtype, size: int = 256, repeats: int = 500) -> float:
+    """FLOP/s of ``product`` (``torch.mm`` or :func:`onednn_mm`) of two size x size matrices in ``dtype`` at the
+    current thread count (after 50 warm-ups)."""
     a, b = torch.randn(size, size).to(dtype), torch.randn(size, size).to(dtype)
     for _ in range(50):
-        a @ b
+        product(a, b)
     tic = time.perf_counter()
     for _ in range(repeats):
-        a @ b
+        product(a, b)
     return 2 * size ** 3 * repeats / (time.perf_counter() - tic)
 
 
 def floor_measure(env, flops: float, bf16: bool) -> Measure:
-    """One round of (a): the physics, the matmul rates and the idealised floors (fp32; bf16 on such a CPU)."""
+    """One round of (a): the physics, the matmul rates (torch.mm's and oneDNN's) and the idealised floors at the
+    faster of the two (fp32; bf16 on such a CPU)."""
     def measure() -> dict[str, float]:
         torch.set_num_threads(1)
         physics = physics_seconds_per_cycle(env)
-        measures = {"physics": physics, "fp32 rate": matmul_flops_per_second(torch.float32)}
-        measures["ideal"] = physics + BATCHES * flops / measures["fp32 rate"]
-        if bf16:
-            measures["bf16 rate"] = matmul_flops_per_second(torch.bfloat16)
-            measures["ideal bf16"] = physics + BATCHES * flops / measures["bf16 rate"]
+        measures = {"physics": physics}
+        for dtype, name, floor in ((torch.float32, "fp32", "ideal"), (torch.bfloat16, "bf16", "ideal bf16"))[:1 + bf16]:
+            measures[f"{name} mm rate"] = matmul_flops_per_second(torch.mm, dtype)
+            measures[f"{name} onednn rate"] = matmul_flops_per_second(onednn_mm, dtype)
+            rate = max(measures[f"{name} mm rate"], measures[f"{name} onednn rate"])
+            measures[floor] = physics + BATCHES * flops / rate
         return measures
     return measure
 
@@ -257,8 +267,10 @@ def report(kept: dict[str, dict[str, list[float]]], cores: int) -> list[str]:
     """The printed lines of the rounds' results (after the CPU line)."""
     floor = kept["floor"]
     practical = [a + b for a, b in zip(floor["physics"], kept["plain"]["update"])]
-    lines = [f"matmul rate 256x256x256, 1 thread: fp32 {spread(floor['fp32 rate'], 1e-9, 1)} GFLOP/s"
-             + (f", bf16 {spread(floor['bf16 rate'], 1e-9, 1)} GFLOP/s" if "bf16 rate" in floor else ""),
+    lines = [f"matmul rate 256x256x256, 1 thread, GFLOP/s, torch.mm / oneDNN: fp32 "
+             f"{spread(floor['fp32 mm rate'], 1e-9, 1)} / {spread(floor['fp32 onednn rate'], 1e-9, 1)}"
+             + (f"; bf16 {spread(floor['bf16 mm rate'], 1e-9, 1)} / {spread(floor['bf16 onednn rate'], 1e-9, 1)}"
+                if "bf16 mm rate" in floor else "") + " (the floors take the faster)",
              f"raw mj_step of one cycle          {spread(floor['physics'])} s",
              f"(a) idealised floor, fp32         {spread(floor['ideal'])} s/cycle"]
     if "ideal bf16" in floor:

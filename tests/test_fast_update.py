@@ -13,6 +13,7 @@ import pytest
 import torch
 from helpers import TINY, metrics
 
+import hersd.engine.learners.fast as fast_module
 import hersd.engine.resources as resources
 from hersd.contract.compose import compose_train
 from hersd.contract.config import DDPGConfig, LearnerConfig, TrainConfig, config_record
@@ -112,8 +113,11 @@ def test_its_gradients_are_autogradss_to_1e_5_relative(name, size, monkeypatch):
 @pytest.mark.parametrize("size", SIZES)
 @pytest.mark.parametrize("name", LEARNERS)
 def test_its_updates_follow_the_autograd_updates_within_rounding(name, size):
-    """Three full updates (TD3: the actor steps on the first and third): every parameter within 1e-6 of the
-    default update's (an Adam step moves a weight by about lr = 1e-3), and the same stats within rounding."""
+    """Three full updates (TD3: the actor steps on the first and third): every parameter within 5e-5 of the
+    default update's, 5 % of one Adam step (lr = 1e-3), and the same stats within rounding. Adam divides each
+    gradient element by its own running scale, so a rounding difference of 1e-6 of a layer's largest gradient
+    (oneDNN's products sum in another order than MKL's) moves a small element's step by up to a few percent
+    (measured 1.2e-5 at FetchPush's sizes); a wrong update moves weights by whole steps."""
     reference, fast = learner_pair(name, size)
     for seed in range(3):
         data = random_batch(size, seed)
@@ -125,8 +129,23 @@ def test_its_updates_follow_the_autograd_updates_within_rounding(name, size):
         assert np.allclose(*zip(*numbers), rtol=1e-5, atol=1e-6), (stats, expected)
         fast_parameters = parameters(fast)
         for key, p in parameters(reference).items():
-            assert torch.allclose(fast_parameters[key], p, rtol=0, atol=1e-6), key
+            assert torch.allclose(fast_parameters[key], p, rtol=0, atol=5e-5), key
     assert fast.optimizer.state_dict()["state"].keys() == reference.optimizer.state_dict()["state"].keys()
+
+
+def test_without_onednn_the_fast_update_runs_torchs_own_products_to_the_same_gradients(monkeypatch):
+    """Where torch has no oneDNN (or on another device) the hidden products run in torch.nn.functional.linear:
+    the gradients stay autograd's within 1e-5 of each one's largest element."""
+    monkeypatch.setattr(fast_module, "ONEDNN", False)
+    reference, fast = learner_pair("ddpg", "push")
+    calls = []
+    monkeypatch.setattr(torch.ops.mkldnn, "_linear_pointwise", lambda *args: calls.append(args))
+    data = random_batch("push", 0)
+    torch.manual_seed(0)
+    reference.update(data)
+    torch.manual_seed(0)
+    fast.update(data)
+    assert not calls and max(gradient_errors(reference, fast).values()) < 1e-5
 
 
 def gradient_errors(reference, agent) -> dict[str, float]:

@@ -3,9 +3,11 @@
 The autograd update's rule (``DDPG.update``: the same losses, target, optimiser and checkpoint) in fewer
 float32 passes and without an autograd graph (docs/LEARNERS.md, "The fast update"):
 
-- each MLP's forward is ``torch.addmm`` into buffers kept from one update to the next (a network and its
-  target share them), ReLU in place; its backward is ``torch.mm`` into the parameters' own ``.grad`` tensors
-  (kept, never set to None), the ReLU mask read from the kept activations, which the gradient then overwrites;
+- each MLP's hidden layers run as oneDNN matmuls with the bias and ReLU fused in (:func:`_linear`: torch's
+  float32 ``mm`` is MKL's, which on AMD CPUs runs at half oneDNN's rate), the output layer's narrow products
+  as ``torch.addmm``/``mm`` into kept buffers; the backward writes each parameter's ``.grad`` (never None), the
+  ReLU mask read from the kept activations, which the gradient then overwrites;
+- the first critic's passes over the critic loss's rows and the actor loss's in one product of 2B rows;
 - the critic's loss and the actor's share one buffer of inputs, (s, a / max_action) above (s, pi(s)); the
   actor loss's -mean Q_1(s, pi) goes back through the critic's weights (not into their gradients: the autograd
   update detaches them there) to the action columns only, dL/dpi, then through tanh and the actor by hand;
@@ -22,9 +24,9 @@ copies of the float32 master weights, refreshed after each optimiser step, targe
 output layers, losses, target and Adam in float32; docs/LEARNERS.md, "Precision"): gradients within 0.15 of each
 gradient's largest element of the float32 autograd update's, as close as bf16 autocast's.
 
-Its sums run in another order than autograd's (products of other shapes, the bias added by ``addmm``, the
-target's r + gamma Q' in one pass), so its numbers differ from the default update's in the last bits and a
-run's grow apart from there: ``update=fast`` is a run of its own (its folder differs), and the default
+Its sums run in another order than autograd's (oneDNN's products, of other shapes, the bias added inside the
+product, the target's r + gamma Q' in one pass), so its numbers differ from the default update's in the last
+bits and a run's grow apart from there: ``update=fast`` is a run of its own (its folder differs), and the default
 update stays the code every earlier run ran. ``tests/test_fast_update.py`` holds its gradients to
 autograd's. SAC has none: the config refuses ``learner=sac update=fast``.
 """
@@ -45,13 +47,34 @@ from hersd.engine.learners.td3 import TD3
 from hersd.engine.replay.buffer import TransitionBatch
 
 _threshold_backward = torch.ops.aten.threshold_backward.grad_input  # g * (h > 0), into an out tensor
+ONEDNN = torch.backends.mkldnn.is_available()  # :func:`_linear`'s products by oneDNN
+
+
+def _linear(x: torch.Tensor, weight: torch.Tensor, bias: Optional[torch.Tensor] = None,
+            relu: bool = False) -> torch.Tensor:
+    """x (rows, in) @ weight (out, in).T (+ bias, then ReLU) -> (rows, out), a new float32 tensor: by oneDNN's
+    matmul on a CPU (torch's own float32 ``mm`` goes to MKL, which on AMD CPUs runs its AVX2 code, half oneDNN's
+    rate on family 26: docs/LEARNERS.md, "The fast update"); by ``torch.nn.functional.linear`` on other devices
+    and where this torch has no oneDNN."""
+    if ONEDNN and x.device.type == "cpu":
+        return torch.ops.mkldnn._linear_pointwise(x, weight, bias, "relu" if relu else "none", [], "")
+    product = torch.nn.functional.linear(x, weight, bias)
+    return product.relu_() if relu else product
+
+
+def _output_backward(grad: torch.Tensor, weight: torch.Tensor, out: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """dL/d input of an output layer: grad (rows, out) @ weight (out, in) -> (rows, in); with one output (the
+    critics) the same products as a broadcast multiply, which runs faster than a product of inner size 1."""
+    if weight.shape[0] == 1:
+        return torch.mul(grad, weight, out=out)
+    return torch.mm(grad, weight, out=out)
 
 
 class Activations:
     """Buffers of one network's passes, shared by a network and its target (the target's passes end before the
-    network's begin): each hidden layer's output and one scratch gradient (in ``hidden_dtype``), the output
-    (float32), for up to ``rows`` rows; with bf16 hidden layers also ``widened``, the last hidden layer's output
-    in float32 (the float32 output layer's input, then its gradient)."""
+    network's begin), for up to ``rows`` rows: the output (float32); with bf16 hidden layers (:class:`HandMLPBF16`)
+    also each hidden layer's output and one scratch gradient (bf16), and ``widened``, the last hidden layer's
+    output in float32 (the float32 output layer's input, then its gradient)."""
 
     def __init__(self, hidden_dtype: torch.dtype = torch.float32) -> None:
         self.hidden_dtype = hidden_dtype
@@ -61,22 +84,27 @@ class Activations:
         self.scratch: Optional[torch.Tensor] = None
         self.widened: Optional[torch.Tensor] = None
 
-    def take(self, weights: list[torch.Tensor], rows: int) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+    def take(self, weights: list[torch.Tensor], rows: int) -> tuple[list[torch.Tensor], torch.Tensor,
+                                                                     Optional[torch.Tensor]]:
         """Views of ``rows`` rows of the buffers (made anew when more rows are asked for than they hold)."""
         if rows > self.rows:
             like, dtype = weights[0], self.hidden_dtype
-            self.hidden = [like.new_empty(rows, weight.shape[0], dtype=dtype) for weight in weights[:-1]]
             self.output = like.new_empty(rows, weights[-1].shape[0])
             self.scratch = like.new_empty(rows, max(weight.shape[0] for weight in weights[:-1]), dtype=dtype)
             if dtype != torch.float32:
+                self.hidden = [like.new_empty(rows, weight.shape[0], dtype=dtype) for weight in weights[:-1]]
                 self.widened = like.new_empty(rows, weights[-1].shape[1])
             self.rows = rows
-        return [h[:rows] for h in self.hidden], self.output[:rows], self.scratch[:rows]
+        scratch = self.scratch[:rows] if self.scratch is not None else None
+        return [h[:rows] for h in self.hidden], self.output[:rows], scratch
 
 
 class HandMLP:
     """Forward and backward of a ReLU :func:`hersd.engine.learners.base.mlp` by hand, on its own parameters (which
-    Adam and ``load_state_dict`` change in place): activations kept in ``buffers``, gradients into ``.grad``."""
+    Adam and ``load_state_dict`` change in place). The hidden layers' products run in oneDNN (:func:`_linear`,
+    the ReLU and bias fused in; new tensors, the activations kept for the backward, which overwrites them with
+    the gradient); the output layer's narrow ones in ``torch.addmm``/``mm`` into the kept output buffer and
+    ``.grad``."""
 
     def __init__(self, net: nn.Sequential, grads: bool, buffers: Optional[Activations] = None):
         layers = [module for module in net if isinstance(module, nn.Linear)]
@@ -92,11 +120,11 @@ class HandMLP:
     def forward(self, inputs: torch.Tensor) -> torch.Tensor:
         """(rows, in) -> (rows, out), keeping the inputs and the ReLU outputs for :meth:`backward`; the
         output is a buffer that the next forward overwrites."""
-        hidden, output, _ = self.buffers.take(self.weights, inputs.shape[0])
-        h = inputs
-        for weight, bias, out in zip(self.weights, self.biases, hidden):
-            h = torch.addmm(bias, h, weight.t(), out=out).relu_()
-        self.inputs, self.hidden = inputs, hidden
+        output = self.buffers.take(self.weights, inputs.shape[0])[1]
+        h, self.inputs, self.hidden = inputs, inputs, []
+        for weight, bias in zip(self.weights[:-1], self.biases[:-1]):
+            h = _linear(h, weight, bias, relu=True)
+            self.hidden.append(h)
         return torch.addmm(self.biases[-1], h, self.weights[-1].t(), out=output)
 
     def backward(self, grad_output: torch.Tensor, weight_rows: int,
@@ -104,14 +132,14 @@ class HandMLP:
         """Back from dL/d output (rows, out) of the last forward: each parameter's ``.grad`` set to the
         gradient of the first ``weight_rows`` rows; returns dL/d inputs[input_rows, input_cols] (or None).
         Each hidden layer's kept output is overwritten by the gradient at its input (it is not needed after)."""
-        scratch = self.buffers.take(self.weights, grad_output.shape[0])[2]
-        g = grad_output
+        g, last = grad_output, len(self.weights) - 1
         for i in reversed(range(len(self.weights))):
             below = self.hidden[i - 1] if i else self.inputs
             if weight_rows:
                 self._parameter_grads(i, g[:weight_rows], below[:weight_rows])
             if i:
-                dh = torch.mm(g, self.weights[i], out=scratch[:, :below.shape[1]])
+                dh = (_output_backward(g, self.weights[i], out=self.buffers.take(self.weights, g.shape[0])[2])
+                      if i == last else _linear(g, self.weights[i].t()))
                 g = _threshold_backward(dh, below, 0, grad_input=below)
         if input_rows is None:
             return None
@@ -121,8 +149,10 @@ class HandMLP:
     def _parameter_grads(self, i: int, g: torch.Tensor, below: torch.Tensor) -> None:
         """Layer i's weight and bias gradients into their ``.grad``, from the gradient at its output g (rows, out)
         and its input ``below`` (rows, in)."""
-        if i:
+        if i == len(self.weights) - 1:  # the output layer's few rows
             torch.mm(g.t(), below, out=self.weights[i].grad)
+        elif i:  # a new tensor made the .grad (the optimiser reads .grad anew at each step)
+            self.weights[i].grad = _linear(g.t(), below.t())
         else:  # the first layer's few input columns: the product as (in, out) runs faster, then transposed
             self.weights[0].grad.copy_(torch.mm(below.t(), g).t())
         torch.sum(g, 0, out=self.biases[i].grad)
@@ -175,7 +205,7 @@ class HandMLPBF16(HandMLP):
             torch.mm(grad_output[:weight_rows].t(), widened[:weight_rows], out=self.weights[last].grad)
             torch.sum(grad_output[:weight_rows], 0, out=self.biases[last].grad)
         below = self.hidden[-1]
-        dh = scratch[:, :below.shape[1]].copy_(torch.mm(grad_output, self.weights[last], out=widened))
+        dh = scratch[:, :below.shape[1]].copy_(_output_backward(grad_output, self.weights[last], out=widened))
         g = _bf16_threshold_backward(dh, below)
         for i in reversed(range(last)):
             below = self.hidden[i - 1] if i else self.inputs
@@ -311,7 +341,8 @@ class FastUpdate:
                 continue
             policy_loss = -value[rows:].mean().item()
             grad[rows:].fill_(-1.0 / rows)
-            policy_q = (policy_loss, hand.backward(grad, rows, slice(rows, None), slice(self.actor[0].in_features, None)))
+            dpi = hand.backward(grad, rows, slice(rows, None), slice(self.actor[0].in_features, None))
+            policy_q = (policy_loss, dpi)
         return torch.stack(losses).sum().item() / rows, q, policy_q
 
     def _actor_backward(self, pi: torch.Tensor, policy_loss: float, dpi: torch.Tensor) -> float:
