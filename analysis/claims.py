@@ -21,7 +21,8 @@ that decides it; :func:`claims_table` reads the measurement from the report's ow
 Its words say the medians (``summary.csv``) and, given ``per_seed.csv``, the seeds' means the permutation test
 compares (an epoch never reached counted as K + 1). Besides the paper's claims it holds a row per hypothesis
 registered before its runs (:data:`REGISTRY`, docs/registered.csv: its id, arms, statistic, direction and the
-commit that registered it; a two-sided one reads ``separated`` / ``not separated``), a row per claim of the paper
+commit that registered it; a two-sided one reads ``separated`` / ``not separated``, the latter with the 95 % interval of the difference
+of seed means by inverting the test: the differences its seeds would have separated), a row per claim of the paper
 no committed run measures (:data:`NOT_MEASURED`: ``registered: <id>`` or ``not planned yet``), and two claims
 measured from ``per_seed.csv`` alone (:func:`spread_row`, :func:`slide_q_row`). :func:`late_judged_runs` names
 the runs a hypothesis judges that started before its registration.
@@ -41,7 +42,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.load import HER_WEIGHTS, PAPER_EPOCHS, config_label
-from analysis.metrics import EXACT_SPLITS, PERMUTATION_RESAMPLES, smallest_p_value
+from analysis.metrics import EXACT_SPLITS, PERMUTATION_RESAMPLES, shift_interval, smallest_p_value
 from hersd.contract.tasks import task_title
 from hersd.contract.schedules.constant import Constant
 from hersd.contract.schedules.exponential import Exponential
@@ -135,8 +136,9 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         return row | {"verdict": f"consistent: not separated at {at}" if p >= ALPHA else "not reproduced: separated"}
     if claim.two_sided and claim.statistic != "bias_real":
         better = p_better <= p_worse  # the direction of the seeds' means, the statistic tested
-        return row | {"verdict": f"separated: {claim.config} {'better' if better else 'worse'}" if p < ALPHA
-                      else f"not separated at {at}"}
+        if p < ALPHA:
+            return row | {"verdict": f"separated: {claim.config} {'better' if better else 'worse'}"}
+        return row | {"hersd": row["hersd"] + _detectable_words(claim, per_seed), "verdict": f"not separated at {at}"}
     if p_better < ALPHA and (direction or not two_sided):
         verdict = "reproduced"
     elif p_worse < ALPHA and (not direction or not two_sided):
@@ -154,14 +156,31 @@ def _seed_means_words(claim: Claim, per_seed: pd.DataFrame | None) -> str:
     critic's bias (its test's own table says its means)."""
     if per_seed is None or claim.statistic not in per_seed.columns:
         return ""
-    means = []
-    for config in (claim.config, claim.versus):
-        seeds = per_seed[(per_seed["task"] == claim.task) & (per_seed["config"] == config)
-                         & per_seed["complete"].astype(bool)][claim.statistic].astype(float)
-        if claim.statistic.startswith("epochs_to_"):
-            seeds = seeds.fillna(PAPER_EPOCHS + 1)
-        means.append(seeds.mean())
+    means = [_seed_values(per_seed, claim, config).mean() for config in (claim.config, claim.versus)]
     return f"; seed means {means[0]:.4g} vs {means[1]:.4g} (the test's statistic)"
+
+
+def _detectable_words(claim: Claim, per_seed: pd.DataFrame | None) -> str:
+    """``; the test would have separated a difference of seed means below L or above H``: the ends of the 95 %
+    interval of that difference by inverting the two-sided test (:func:`analysis.metrics.shift_interval`), what a
+    two-sided registered hypothesis that is not separated reports; "" without ``per_seed``."""
+    if per_seed is None or claim.statistic not in per_seed.columns:
+        return ""
+    x, y = (_seed_values(per_seed, claim, config) for config in (claim.config, claim.versus))
+    epochs = claim.statistic.startswith("epochs_to_")
+    low, high = shift_interval(x, y, ALPHA, tolerance=0.01 if epochs else 1e-4)
+    digits = 1 if epochs else 3
+    return (f"; the test would have separated a difference of seed means below {low:+.{digits}f} or above "
+            f"{high:+.{digits}f} (95 % interval, the test inverted)")
+
+
+def _seed_values(per_seed: pd.DataFrame, claim: Claim, config: str) -> np.ndarray:
+    """The complete seeds' values of ``claim``'s statistic for ``config`` (an epoch never reached: K + 1): (seeds,)."""
+    seeds = per_seed[(per_seed["task"] == claim.task) & (per_seed["config"] == config)
+                     & per_seed["complete"].astype(bool)][claim.statistic].astype(float)
+    if claim.statistic.startswith("epochs_to_"):
+        seeds = seeds.fillna(PAPER_EPOCHS + 1)
+    return seeds.to_numpy()
 
 
 def _better(value: float, versus_value: float, lower_better: bool) -> bool:

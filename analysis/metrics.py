@@ -448,6 +448,27 @@ def _split_memberships(size: int, chosen: int) -> np.ndarray:
     return memberships
 
 
+def shift_interval(x: np.ndarray, y: np.ndarray, alpha: float, tolerance: float) -> tuple[float, float]:
+    """The shifts d of x's values that the two-sided permutation test of x - d against y does not separate at
+    ``alpha`` (p >= alpha): the (1 - alpha) interval of the difference of the means by inverting the test,
+    (low, high) to ``tolerance``. x (n,), y (m,); a shift outside it is one these seeds would have detected.
+    Each end by bisection: the test's p falls as d moves away from the observed difference."""
+    def not_separated(shift: float) -> bool:
+        greater, less = permutation_p_values((x - shift)[None], y[None])
+        return min(1.0, 2 * min(greater[0], less[0])) >= alpha
+
+    observed = float(x.mean() - y.mean())
+    reach = 2 * (float(np.ptp(np.concatenate([x, y]))) + abs(observed)) + 1  # beyond it every split lies on one side
+
+    def edge(outside: float) -> float:
+        inside = observed
+        while abs(outside - inside) > tolerance:
+            middle = (inside + outside) / 2
+            inside, outside = (middle, outside) if not_separated(middle) else (inside, middle)
+        return inside
+    return edge(observed - reach), edge(observed + reach)
+
+
 def smallest_p_value(seeds: int, versus_seeds: int, two_sided: bool = False) -> float:
     """The smallest p :func:`permutation_p_values` can give, the test's power: one split (two, two-sided) of
     all C(seeds + versus_seeds, seeds) when exact, else of the PERMUTATION_RESAMPLES random ones + the observed."""

@@ -2,6 +2,7 @@
 with the tables the committed report generated."""
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from analysis.claims import (CONTROL, EXP_025, HER, LINEAR_025, NOT_MEASURED, REGISTRY, Claim, Hypothesis,
                              claims_markdown, claims_table, full_claims_table, late_judged_runs, registered_hypotheses,
                              slide_q_row, spread_row)
+from analysis.metrics import permutation_p_values
 
 ROOT = Path(__file__).resolve().parent.parent
 FASTER = Claim("push", "decay faster", "Fig. 4(a)", LINEAR_025, HER, "epochs_to_0.9")
@@ -143,6 +145,26 @@ def test_a_registered_two_sided_hypothesis_says_separated_or_not_and_a_one_sided
     one_sided = Claim("push", "h: faster", "stage 3", LINEAR_025, HER, "epochs_to_0.9", registered="h")
     assert claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS,
                         (one_sided,)).iloc[0]["verdict"] == "supported"
+
+
+def test_a_two_sided_hypothesis_not_separated_gives_the_differences_its_seeds_would_have_separated():
+    """The words end with the 95 % interval of the difference of seed means by inverting the two-sided test: a
+    shift just inside either end is not separated (p >= 0.05), one just outside is; a separated one has no interval."""
+    seeds = per_seed_table({LINEAR_025: [0.90, 0.95, 0.80, 0.99, 0.93], HER: [0.97, 0.85, 0.99, 0.92, 0.96, 0.90]})
+    two_sided = Claim("push", "h: differ", "stage 2", LINEAR_025, HER, "final", two_sided=True, registered="h")
+    row = claims_table(summary_table(0.93, 0.94), permutation_table(0.3, 0.7), NO_BIAS, (two_sided,), seeds).iloc[0]
+    match = re.search(r"separated a difference of seed means below ([-+.\d]+) or above ([-+.\d]+) \(95 % interval, "
+                      r"the test inverted\)$", row["hersd"])
+    low, high = float(match[1]), float(match[2])
+    x, y = (seeds[seeds["config"] == config]["final"].to_numpy() for config in (LINEAR_025, HER))
+    assert low < x.mean() - y.mean() < high
+
+    def p(shift: float) -> float:
+        greater, less = permutation_p_values((x - shift)[None], y[None])
+        return min(1.0, 2 * min(greater[0], less[0]))
+    assert p(low + 0.002) >= 0.05 > p(low - 0.002) and p(high - 0.002) >= 0.05 > p(high + 0.002)
+    separated = claims_table(summary_table(0.93, 0.94), permutation_table(0.01, 0.99), NO_BIAS, (two_sided,), seeds)
+    assert "interval" not in separated.iloc[0]["hersd"]
 
 
 def test_the_seed_spread_claim_tests_the_spreads_two_sided_exactly():
