@@ -22,10 +22,10 @@ Its words say the medians (``summary.csv``) and, given ``per_seed.csv``, the see
 compares (an epoch never reached counted as K + 1). Besides the paper's claims it holds a row per hypothesis
 registered before its runs (:data:`REGISTRY`, docs/registered.csv: its id, arms, statistic, direction and the
 commit that registered it; a two-sided one reads ``separated`` / ``not separated``, the latter with the 95 %
-interval of the difference of seed means by inverting the test: the differences its seeds would have
-separated), a row per claim of the paper no committed run measures (:data:`NOT_MEASURED`: ``registered: <id>``
-or ``not planned yet``), and two claims measured from ``per_seed.csv`` alone (:func:`spread_row`, :func:`slide_q_row`). :func:`late_judged_runs` names
-the runs a hypothesis judges that started before its registration.
+interval of the difference of seed means by inverting the test: the differences its seeds would have separated), a
+row per claim of the paper no committed run measures (:data:`NOT_MEASURED`: ``registered: <id>`` or ``not planned
+yet``), and two claims measured from ``per_seed.csv`` alone (:func:`spread_row`, :func:`slide_q_row`).
+:func:`late_judged_runs` names the runs a hypothesis judges that started before its registration.
 
 The configurations are named by the schedule classes themselves (:func:`analysis.load.config_label`), so
 the table follows any renaming; the control's rate is the linear schedule's exact mean (eq. 10).
