@@ -127,6 +127,57 @@ def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resu
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 
 
+def test_ctrl_c_while_the_checkpoint_is_written_is_the_same_one_line_with_exit_130(tmp_path, capsys, monkeypatch):
+    """A Ctrl-C in the middle of torch.save's write ends in torch's zip-writer RuntimeError, the KeyboardInterrupt
+    only its context: still the run's one line and exit 130, no temporary file, and the run resumes to the
+    uninterrupted metrics."""
+    import io
+
+    import torch
+
+    import hersd.engine.train as train_module
+
+    save, run_epoch, at = torch.save, train_module.run_epoch, {"epoch": 0}
+
+    class CutStream(io.RawIOBase):
+        """Takes some bytes of the write, then the Ctrl-C."""
+
+        def __init__(self, stream):
+            super().__init__()
+            self.stream, self.written = stream, 0
+
+        def writable(self) -> bool:
+            return True
+
+        def write(self, data) -> int:
+            if self.written > 4096:
+                raise KeyboardInterrupt
+            self.written += len(data)
+            return self.stream.write(data)
+
+    def counting_run_epoch(state, epoch, rate=None):
+        at["epoch"] = epoch
+        return run_epoch(state, epoch, rate)
+
+    def cut_save(obj, f, *args, **kwargs):
+        return save(obj, CutStream(f) if at["epoch"] == 2 and isinstance(f, io.BufferedWriter) else f, *args, **kwargs)
+
+    monkeypatch.setattr(train_module, "run_epoch", counting_run_epoch)
+    monkeypatch.setattr(torch, "save", cut_save)
+    args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}"]
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    monkeypatch.undo()
+    directory = run_dir(compose(args))
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err.strip() == (f"hersd-train: interrupted; the finished epochs are kept in "
+                                               f"{directory}: re-run the same command to resume")
+    assert sorted(path.name for path in directory.iterdir()) == ["checkpoint.pt", "run.lock", "run.mcap"]  # no .tmp
+    main(args)
+    reference = train(compose([*TINY, "epochs=3", f"results_dir={tmp_path / 'ref'}"]))
+    pd.testing.assert_frame_equal(metrics(directory / "run.mcap"), metrics(reference))
+
+
 class _Loading(types.ModuleType):
     """A module whose names are never there: a Ctrl-C while it loads (torch, under hersd.engine.train)."""
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 FULL_DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT)  # no space left on the device; the user's quota used up
@@ -32,13 +33,23 @@ def full_disk(err: BaseException) -> bool:
     """Whether ``err``, or an error it was raised from or while handling (torch wraps a write's OSError in a
     RuntimeError), is a full disk (:data:`FULL_DISK_ERRNOS`, or a :class:`DiskFullError`, which keeps no OSError
     once it crossed from another process)."""
+    return any(isinstance(link, DiskFullError) or isinstance(link, OSError) and link.errno in FULL_DISK_ERRNOS
+               for link in _chain(err))
+
+
+def interrupted(err: BaseException) -> bool:
+    """Whether ``err`` is, or was raised while handling, a Ctrl-C (KeyboardInterrupt): torch.save interrupted in
+    the middle of its write ends in its zip writer's own RuntimeError, the Ctrl-C only its context."""
+    return any(isinstance(link, KeyboardInterrupt) for link in _chain(err))
+
+
+def _chain(err: BaseException | None) -> Iterator[BaseException]:
+    """``err`` and the errors it was raised from or while handling, each once."""
     seen: set[int] = set()
     while err is not None and id(err) not in seen:
-        if isinstance(err, DiskFullError) or isinstance(err, OSError) and err.errno in FULL_DISK_ERRNOS:
-            return True
+        yield err
         seen.add(id(err))
         err = err.__cause__ or err.__context__
-    return False
 
 
 def _device(path: Path) -> os.statvfs_result | None:

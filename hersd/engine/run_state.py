@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from hersd.contract.config import TrainConfig
-from hersd.contract.errors import ConfigError, DiskFullError, full_disk
+from hersd.contract.errors import ConfigError, DiskFullError, full_disk, interrupted
 from hersd.engine.envs.make import EnvSpec, check_success_reported, env_spec, make_env
 from hersd.engine.envs.goal_envs import vectorised_reward
 from hersd.engine.learners import GoalConditionedLearner, learner_class
@@ -187,8 +187,9 @@ def check_memory(cfg: TrainConfig, spec: EnvSpec, one_env_bytes: int) -> None:
 def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
     """Write a state dict atomically (a temporary file renamed into place). A write that fails leaves ``path``
     as it was and no temporary file; on a full disk it raises :class:`DiskFullError` (one line: the file, the
-    bytes it needs, those free). Written through a Python stream, whose OSError torch keeps as the context of
-    its own RuntimeError (a path given to torch.save fails with an ``enforce fail`` alone)."""
+    bytes it needs, those free), after a Ctrl-C KeyboardInterrupt. Written through a Python stream, whose
+    OSError (or KeyboardInterrupt) torch keeps as the context of its own RuntimeError (a path given to
+    torch.save fails with an ``enforce fail`` alone)."""
     tmp = path.with_name(path.name + ".tmp")
     try:
         with open(tmp, "wb") as stream:
@@ -198,6 +199,8 @@ def save_checkpoint(path: Path, state: dict[str, Any]) -> None:
         tmp.unlink(missing_ok=True)
         if full_disk(err):
             raise DiskFullError(path, serialized_bytes(state)) from None
+        if interrupted(err):  # a Ctrl-C during the write: the run's own Ctrl-C line, not torch's zip error
+            raise KeyboardInterrupt from None
         raise
 
 
