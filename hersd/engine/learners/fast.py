@@ -72,9 +72,10 @@ def _output_backward(grad: torch.Tensor, weight: torch.Tensor, out: Optional[tor
 
 class Activations:
     """Buffers of one network's passes, shared by a network and its target (the target's passes end before the
-    network's begin), for up to ``rows`` rows: the output (float32); with bf16 hidden layers (:class:`HandMLPBF16`)
-    also each hidden layer's output and one scratch gradient (bf16), and ``widened``, the last hidden layer's
-    output in float32 (the float32 output layer's input, then its gradient)."""
+    network's begin), for up to ``rows`` rows: the output (float32) and one scratch gradient (in ``hidden_dtype``:
+    the gradient at the output layer's input); with bf16 hidden layers (:class:`HandMLPBF16`) also each hidden
+    layer's output (bf16) and ``widened``, the last hidden layer's output in float32 (the float32 output layer's
+    input, then its gradient)."""
 
     def __init__(self, hidden_dtype: torch.dtype = torch.float32) -> None:
         self.hidden_dtype = hidden_dtype
@@ -84,8 +85,7 @@ class Activations:
         self.scratch: Optional[torch.Tensor] = None
         self.widened: Optional[torch.Tensor] = None
 
-    def take(self, weights: list[torch.Tensor], rows: int) -> tuple[list[torch.Tensor], torch.Tensor,
-                                                                     Optional[torch.Tensor]]:
+    def take(self, weights: list[torch.Tensor], rows: int) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
         """Views of ``rows`` rows of the buffers (made anew when more rows are asked for than they hold)."""
         if rows > self.rows:
             like, dtype = weights[0], self.hidden_dtype
@@ -95,8 +95,7 @@ class Activations:
                 self.hidden = [like.new_empty(rows, weight.shape[0], dtype=dtype) for weight in weights[:-1]]
                 self.widened = like.new_empty(rows, weights[-1].shape[1])
             self.rows = rows
-        scratch = self.scratch[:rows] if self.scratch is not None else None
-        return [h[:rows] for h in self.hidden], self.output[:rows], scratch
+        return [h[:rows] for h in self.hidden], self.output[:rows], self.scratch[:rows]
 
 
 class HandMLP:
@@ -110,7 +109,7 @@ class HandMLP:
         layers = [module for module in net if isinstance(module, nn.Linear)]
         self.weights = [layer.weight for layer in layers]
         self.biases = [layer.bias for layer in layers]
-        if grads:  # kept: each backward overwrites them (out=), the optimiser reads them
+        if grads:  # never None: each backward writes them (into them or anew), the optimiser reads them
             for parameter in (*self.weights, *self.biases):
                 parameter.grad = torch.zeros_like(parameter)
         self.buffers = buffers if buffers is not None else Activations()
@@ -133,13 +132,14 @@ class HandMLP:
         gradient of the first ``weight_rows`` rows; returns dL/d inputs[input_rows, input_cols] (or None).
         Each hidden layer's kept output is overwritten by the gradient at its input (it is not needed after)."""
         g, last = grad_output, len(self.weights) - 1
+        scratch = self.buffers.take(self.weights, g.shape[0])[2]
         for i in reversed(range(len(self.weights))):
             below = self.hidden[i - 1] if i else self.inputs
             if weight_rows:
                 self._parameter_grads(i, g[:weight_rows], below[:weight_rows])
             if i:
-                dh = (_output_backward(g, self.weights[i], out=self.buffers.take(self.weights, g.shape[0])[2])
-                      if i == last else _linear(g, self.weights[i].t()))
+                dh = (_output_backward(g, self.weights[i], out=scratch[:, :below.shape[1]]) if i == last
+                      else _linear(g, self.weights[i].t()))
                 g = _threshold_backward(dh, below, 0, grad_input=below)
         if input_rows is None:
             return None
