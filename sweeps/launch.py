@@ -239,7 +239,7 @@ def usage() -> str:
         "Trains many runs (a grid x tasks x seeds) seed by seed, one per core (or on SLURM); complete",
         "runs are skipped and interrupted ones resumed, so the same command finishes a sweep. A key",
         "given a comma list (schedule=constant,linear) is swept. --dry-run lists each run and its state",
-        "(complete; running: epoch N of K and its pid; resumable: epoch N of K; new) without running.", "",
+        "(complete; running: epoch N of K and its pid; failed; resumable: epoch N of K; new) without running.", "",
         "config groups:", *groups,
         f"  hydra/launcher={'|'.join(launcher_options())}   (local: this machine, one run per core, the default)", "",
         "keys: seeds=5 (without seed=, each grid sweeps seed over range(seeds)), results_dir=results,",

@@ -72,8 +72,8 @@ def schedule_class(kind: str) -> type[Schedule]:
 
 def schedule_from_config(node: Mapping[str, Any], total_epochs: int) -> Schedule:
     """A config's ``schedule`` mapping (``kind`` or ``_target_`` and the parameters) -> the resolved schedule of
-    a run of total_epochs (:func:`settle`); ConfigError (one line) for an unknown kind, a setting it lacks, a
-    value out of range or a rate outside [0, 1]."""
+    a run of total_epochs (:func:`settle`); ConfigError (one line) for an unknown kind, a setting it lacks or a
+    value out of range (its rates are checked when its run is resolved)."""
     settings = dict(node)
     target, kind = settings.pop(TARGET_KEY, None), settings.pop("kind", None)
     cls = schedule_class(target or kind) if target or kind else DEFAULT
