@@ -14,6 +14,8 @@ COMMIT_ID = re.compile(r"\b(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}\b"
 # registered before its runs (its id, docs/registered.csv); else the sentence says it is exploratory.
 PAPER_DIRECTION = r"for the (?:linear|exponential|decay)\b|the paper's direction|exploratory"
 GENERATED_BLOCK = re.compile(r"<!-- ([\w-]+)\b.*?-->.*?<!-- /\1 -->", re.DOTALL)
+ONE_SIDED = re.compile(r"one[- ]sided", re.IGNORECASE)
+P_VALUE = re.compile(r"\bp\s*(?:=|<|>|≤|≈)|\bp-values?\b|\bp of \d", re.IGNORECASE)  # p = 0.03, p < 0.05, p of 0.03
 RESUME_EPOCH = re.compile(r"(resum\w*[^.;]{0,60}?|checkpoints? after )\bepochs? \d", re.IGNORECASE)
 
 
@@ -64,15 +66,15 @@ def one_sided_directions() -> re.Pattern:
 
 
 def undirected_one_sided(markdown: str) -> list[str]:
-    """The prose sentences of ``markdown`` (outside generated blocks, tables, headings and code) that give a p as
-    one-sided without what fixed its direction (:func:`one_sided_directions`)."""
-    lines = [line for line in prose(GENERATED_BLOCK.sub("", markdown))
-             if not line.lstrip().startswith(("|", "#", "<!--"))]
-    text = " ".join(" ".join(lines).split())
+    """The prose sentences and hand-written table rows of ``markdown`` (outside generated blocks, headings and code)
+    that give a p as one-sided without what fixed its direction (:func:`one_sided_directions`)."""
+    lines = [line for line in prose(GENERATED_BLOCK.sub("", markdown)) if not line.lstrip().startswith(("#", "<!--"))]
+    rows = [line for line in lines if line.lstrip().startswith("|")]
+    text = " ".join(" ".join(line for line in lines if line not in rows).split())
     sentences = re.split(r"(?<=[.!?])\s+(?=[A-Z(\"])", text)
     fixed = one_sided_directions()
-    return [sentence for sentence in sentences if re.search(r"one-sided", sentence, re.IGNORECASE)
-            and re.search(r"\bp\s*=|\bp-values?\b", sentence) and not fixed.search(sentence)]
+    return [unit for unit in sentences + rows if ONE_SIDED.search(unit) and P_VALUE.search(unit)
+            and not fixed.search(unit)]
 
 
 @pytest.mark.parametrize("doc", ["docs/RESULTS.md", "README.md", "results/README.md"])
@@ -88,5 +90,9 @@ def test_a_planted_one_sided_p_without_a_claim_is_refused_and_one_with_its_claim
     for fixed in ("one-sided p = 0.028 for the decay", "one-sided p = 0.028, exploratory",
                   "one-sided p = 0.028, as order-final registered"):
         assert undirected_one_sided(text + "\n" + planted.replace("one-sided p = 0.028", fixed) + "\n") == []
-    table_row = "| a | b | one-sided p: HER does better |\n"  # generated comparisons give both directions
-    assert undirected_one_sided(table_row + "`one-sided p = 0.1`\n") == []
+    for variant in ("HER learns sooner (p < 0.01, one sided).", "HER learns sooner, a one-sided p of 0.004."):
+        assert undirected_one_sided(text + "\n" + variant + "\n") == [variant]
+    row = "| HER against linear 0.25 | one-sided permutation p = 0.028 |"
+    assert undirected_one_sided(text + "\n" + row + "\n") == [row], "a hand-written table row is checked too"
+    generated = "<!-- claims-table -->\n| a | b | one-sided p = 0.1: HER does better |\n<!-- /claims-table -->\n"
+    assert undirected_one_sided(generated + "`one-sided p = 0.1`\n") == [], "generated tables give both directions"
