@@ -15,9 +15,10 @@ removed when its log is landed anew. An unfinished log there with more epochs th
 run restarted without a checkpoint and has not caught up) is kept too, until the new attempt passes
 it. A campaign log that is not a readable run log (no run metadata) is not landed (``skipped``); a
 chunk whose checksum fails ends what is read of a log, like a cut (hersd.contract.runlog). One line
-per run: ``landed``, ``unchanged``, ``kept``, ``skipped`` or ``refused``, with its state. A new log (none
-at its path below RESULTS yet) with a session whose ``git_commit`` ends in ``-dirty`` (trained uncommitted code,
-which exists nowhere) is ``refused``, in one line, and the exit status is 1; logs landed before stay as they are.
+per run: ``landed``, ``unchanged``, ``kept``, ``skipped`` or ``refused``, with its state. A log with a
+session whose ``git_commit`` ends in ``-dirty`` (trained uncommitted code, which exists nowhere) that the log
+below RESULTS does not hold yet (a new log, or a landed one resumed by uncommitted code) is ``refused``, in one
+line, and the exit status is 1; the landed log stays as it is, and so do the sessions landed before.
 
 ``--commit``: each complete run whose files differ from git's is committed alone, those files
 only (whatever else is staged stays staged): ``results: <run> complete (K epochs)``. A git
@@ -53,15 +54,22 @@ def log_state(path: Path) -> tuple[bool, int, str]:
     return records.complete, epochs, (f"complete ({epochs} epochs)" if records.complete else f"epoch {epochs}")
 
 
-def dirty_session(path: Path) -> str | None:
-    """Why a log's code exists nowhere: ``session N trained at <commit>-dirty``, for its first session whose
-    ``git_commit`` marks uncommitted changes; None when every session trained committed code (or it is unreadable)."""
+def sessions_of(path: Path) -> list[dict]:
+    """A log's training sessions (``/run/meta``), oldest first; none when there is no log or it is unreadable."""
     try:
-        sessions = read_records(path).sessions
+        return read_records(path).sessions if path.exists() else []
     except RunLogError:
-        return None
-    dirty = [(number, session["git_commit"]) for number, session in enumerate(sessions, start=1)
-             if str(session.get("git_commit") or "").endswith(DIRTY)]
+        return []
+
+
+def dirty_session(path: Path, landed: Path) -> str | None:
+    """Why a log's code exists nowhere: ``session N trained at <commit>-dirty``, for its first session whose
+    ``git_commit`` marks uncommitted changes and that the log landed before (``landed``) does not hold already
+    (the same start time and commit); None when every new session trained committed code."""
+    held = {(session.get("start_time"), session.get("git_commit")) for session in sessions_of(landed)}
+    dirty = [(number, session["git_commit"]) for number, session in enumerate(sessions_of(path), start=1)
+             if str(session.get("git_commit") or "").endswith(DIRTY)
+             and (session.get("start_time"), session.get("git_commit")) not in held]
     return f"session {dirty[0][0]} trained at {dirty[0][1]}" if dirty else None
 
 
@@ -85,7 +93,7 @@ def land_run(source: Path, target: Path) -> tuple[str, bool, str]:
         complete, epochs, state = log_state(snapshot)
         if epochs < 0:
             return "skipped", False, f"{state}: not landed"
-        if not (target / LOG_NAME).exists() and (dirty := dirty_session(snapshot)):  # landed logs stay as they are
+        if dirty := dirty_session(snapshot, target / LOG_NAME):  # the sessions landed before stay as they are
             return "refused", False, (f"{state}: {dirty}, code that exists nowhere: not landed; train from a "
                                       "committed tree (results/README.md)")
         if not complete and (target / LOG_NAME).exists():

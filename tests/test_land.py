@@ -224,6 +224,37 @@ def test_a_new_log_with_a_dirty_session_is_refused_in_one_line_and_landed_ones_s
         f"refused   {results / RUNNING / 'run.mcap'}  epoch 3: session 1 trained at 1a2b3c4-dirty, code that "
         "exists nowhere: not landed; train from a committed tree (results/README.md)"]
     assert not (results / RUNNING).exists() and (results / DONE / "run.mcap").is_file()
-    (results / RUNNING).mkdir(parents=True)  # landed before this rule: it stays, and follows its campaign copy
-    (results / RUNNING / "run.mcap").write_bytes(b"")
-    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 3" in land(campaign, repo).stdout
+    (results / RUNNING).mkdir(parents=True)  # landed before this rule, dirty session and all: it follows its copy
+    (results / RUNNING / "run.mcap").write_bytes((campaign / RUNNING / "run.mcap").read_bytes())
+    with mock.patch("os.fsync"):
+        resume_at(campaign / RUNNING, "1a2b3c4")
+    assert f"landed    {results / RUNNING / 'run.mcap'}  epoch 4" in land(campaign, repo).stdout
+
+
+def resume_at(folder: Path, commit: str) -> None:
+    """A fourth epoch in ``folder``'s log by a new session trained at ``commit`` (as a resume writes it)."""
+    from hersd.contract.runlog import RunLogWriter, read_run
+
+    previous = read_run(folder / "run.mcap")
+    writer = RunLogWriter(folder / "run.mcap", {**previous.sessions[-1], "git_commit": commit,
+                                                "start_time": "2025-01-02T00:00:00+0000"}, previous)
+    writer.write_epoch({**previous.epochs.iloc[-1].to_dict(), "epoch": len(previous.epochs) + 1})
+    writer.close()
+
+
+def test_a_landed_log_resumed_by_uncommitted_code_is_refused_and_stays_as_landed(tmp_path, repo):
+    """A run landed clean and then resumed at ``<commit>-dirty`` gained epochs from code that exists nowhere: its
+    new log is refused in one line (exit 1) and the landed one stays byte for byte."""
+    campaign, results = tmp_path / "campaign", repo / "results"
+    with mock.patch("os.fsync"):
+        write_run(campaign / RUNNING, TrainConfig(epochs=200), np.linspace(0, 1, 3), complete=False,
+                  meta={"git_commit": "1a2b3c4"})
+    assert land(campaign, repo).returncode == 0
+    landed = (results / RUNNING / "run.mcap").read_bytes()
+    with mock.patch("os.fsync"):
+        resume_at(campaign / RUNNING, "5d6e7f8-dirty")
+    done = land(campaign, repo)
+    assert done.returncode == 1 and done.stdout.splitlines()[0] == (
+        f"refused   {results / RUNNING / 'run.mcap'}  epoch 4: session 2 trained at 5d6e7f8-dirty, code that "
+        "exists nowhere: not landed; train from a committed tree (results/README.md)")
+    assert (results / RUNNING / "run.mcap").read_bytes() == landed
