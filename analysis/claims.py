@@ -16,7 +16,10 @@ that decides it; :func:`claims_table` reads the measurement from the report's ow
 - ``too few seeds to test at n v m`` where even the most extreme split of the seeds could not reach
   ALPHA (two-sided at 5 v 2: 2/21 = 0.095), with ``the arms as far apart as the seeds allow`` when p is
   that smallest value: "not separated" would then say nothing about the claim;
-- ``not measured yet`` where either configuration lacks two complete seeds.
+- ``not measured yet`` where either configuration lacks two complete seeds;
+- ``interim at n v m: judged at N v M`` for a registered hypothesis whose arms have fewer complete seeds than it
+  was registered to be judged at (its p shown, no verdict drawn from it: looking again as seeds arrive is not a test
+  at ALPHA).
 
 Its words say the medians (``summary.csv``) and, given ``per_seed.csv``, the seeds' means the permutation test
 compares (an epoch never reached counted as K + 1). Besides the paper's claims it holds a row per hypothesis
@@ -76,6 +79,7 @@ class Claim:
     two_sided: bool = False  # a registered hypothesis without a direction: do the two differ?
     registered: str = ""  # a registered hypothesis's id (docs/registered.csv); "" for the paper's claims
     plan: str = ""  # the registered hypotheses that will measure it, while it is not measured
+    judged_at: tuple[int, int] | None = None  # a registered hypothesis's seeds (config, versus) it is judged at
 
 
 CLAIMS = (
@@ -127,6 +131,8 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         p_better, p_worse = _one_sided(claim, tests)
         p = min(1.0, 2 * min(p_better, p_worse)) if two_sided else p_better
     row |= {"test": permutation_words(seeds, versus_seeds, two_sided), "p": p}
+    if claim.judged_at and (seeds < claim.judged_at[0] or versus_seeds < claim.judged_at[1]):
+        return row | {"verdict": f"interim at {at}: judged at {claim.judged_at[0]} v {claim.judged_at[1]}"}
     if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
         return row | {"verdict": f"not reproduced: {failed} at {at}"}
     if (smallest := smallest_p_value(seeds, versus_seeds, two_sided)) >= ALPHA:
@@ -291,12 +297,14 @@ class Hypothesis:
 
 def registered_hypotheses(path: Path = REGISTRY) -> list[Hypothesis]:
     """The rows of docs/registered.csv (columns id, stage, task, claim, config, versus, statistic, sides
-    ``one-sided`` (for config) or ``two-sided``, judges ``config`` / ``versus`` / ``both``, commit, date)."""
+    ``one-sided`` (for config) or ``two-sided``, judges ``config`` / ``versus`` / ``both``, seeds ``N v M`` it is
+    judged at (empty: at the seeds complete when it is read), commit, date)."""
     table = pd.read_csv(path, dtype=str, keep_default_na=False)
     hypotheses = []
     for row in table.itertuples():
+        judged_at = tuple(int(n) for n in row.seeds.split(" v ")) if row.seeds else None
         claim = Claim(row.task, f"{row.id}: {row.claim}", f"stage {row.stage}", row.config, row.versus, row.statistic,
-                      two_sided=row.sides == "two-sided", registered=row.id)
+                      two_sided=row.sides == "two-sided", registered=row.id, judged_at=judged_at)
         judged = {"config": (row.config,), "versus": (row.versus,), "both": (row.config, row.versus)}[row.judges]
         hypotheses.append(Hypothesis(claim, row.stage, judged, row.commit, row.date))
     return hypotheses

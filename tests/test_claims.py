@@ -147,6 +147,22 @@ def test_a_registered_two_sided_hypothesis_says_separated_or_not_and_a_one_sided
                         (one_sided,)).iloc[0]["verdict"] == "supported"
 
 
+def test_a_hypothesis_short_of_the_seeds_it_is_judged_at_is_interim_whatever_its_p():
+    """Registered to be judged at 5 v 5: at 2 v 5 its p is shown and no verdict drawn, even one below 0.05; at 5 v 5
+    it is judged. Each hypothesis of docs/registered.csv carries the seeds its registration names."""
+    one_sided = Claim("push", "h: faster", "stage 3", LINEAR_025, HER, "epochs_to_0.9", registered="h", judged_at=(5, 5))
+    summary = summary_table(100, 140).assign(seeds=[2, 5, 3])
+    early = claims_table(summary, permutation_table(1 / 21, 1.0), NO_BIAS, (one_sided,)).iloc[0]
+    assert (early["seeds"], early["p"], early["verdict"]) == ("2 v 5", pytest.approx(1 / 21), "interim at 2 v 5: "
+                                                                                              "judged at 5 v 5")
+    full = claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS, (one_sided,)).iloc[0]
+    assert full["verdict"] == "supported"
+    judged_at = {h.claim.registered: h.claim.judged_at for h in registered_hypotheses()}
+    assert judged_at == {"bf16-final": (5, 10), "bf16-speed": (5, 10), "order-final": (5, 5), "late-final": (5, 5),
+                         "late-her": (5, 5), "exp-push-speed": (5, 10), "archer-decay-final": None,
+                         "archer-her-final": None}
+
+
 def test_a_two_sided_hypothesis_not_separated_gives_the_differences_its_seeds_would_have_separated():
     """The words end with the 95 % interval of the difference of seed means by inverting the two-sided test: a
     shift just inside either end is not separated (p >= 0.05), one just outside is; a separated one has no interval."""
