@@ -24,7 +24,8 @@ that decides it; :func:`claims_table` reads the measurement from the report's ow
 Its words say the medians (``summary.csv``) and, given ``per_seed.csv``, the seeds' means the permutation test
 compares (an epoch never reached counted as K + 1). Besides the paper's claims it holds a row per hypothesis
 registered before its runs (:data:`REGISTRY`, docs/registered.csv: its id, arms, statistic, direction and the
-commit that registered it; a two-sided one reads ``separated`` / ``not separated``, the latter with the 95 %
+commit that registered it; a one-sided one reads ``supported`` / ``not supported at n v m``, never ``contradicted``
+(its registration tested one direction); a two-sided one reads ``separated`` / ``not separated``, the latter with the 95 %
 interval of the difference of seed means by inverting the test: the differences its seeds would have separated), a
 row per claim of the paper no committed run measures (:data:`NOT_MEASURED`: ``registered: <id>`` or ``not planned
 yet``), and two claims measured from ``per_seed.csv`` alone (:func:`spread_row`, :func:`slide_q_row`).
@@ -131,8 +132,9 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         p_better, p_worse = _one_sided(claim, tests)
         p = min(1.0, 2 * min(p_better, p_worse)) if two_sided else p_better
     row |= {"test": permutation_words(seeds, versus_seeds, two_sided), "p": p}
-    if claim.judged_at and (seeds < claim.judged_at[0] or versus_seeds < claim.judged_at[1]):
-        return row | {"verdict": f"interim at {at}: judged at {claim.judged_at[0]} v {claim.judged_at[1]}"}
+    if claim.judged_at and (seeds, versus_seeds) != claim.judged_at:  # fewer: not yet; more: not as registered
+        when = "interim" if seeds <= claim.judged_at[0] and versus_seeds <= claim.judged_at[1] else "beyond the registration"
+        return row | {"verdict": f"{when} at {at}: judged at {claim.judged_at[0]} v {claim.judged_at[1]}"}
     if (failed := _neither_learns(claim.statistic, value, versus_value)) is not None:
         return row | {"verdict": f"not reproduced: {failed} at {at}"}
     if (smallest := smallest_p_value(seeds, versus_seeds, two_sided)) >= ALPHA:
@@ -145,6 +147,8 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         if p < ALPHA:
             return row | {"verdict": f"separated: {claim.config} {'better' if better else 'worse'}"}
         return row | {"hersd": row["hersd"] + _detectable_words(claim, per_seed), "verdict": f"not separated at {at}"}
+    if claim.registered:  # one-sided as registered: the other direction was never a hypothesis
+        return row | {"verdict": "supported" if p_better < ALPHA else f"not supported at {at}"}
     if p_better < ALPHA and (direction or not two_sided):
         verdict = "reproduced"
     elif p_worse < ALPHA and (not direction or not two_sided):
@@ -153,7 +157,7 @@ def _claim_row(claim: Claim, summary: pd.DataFrame, tests: pd.DataFrame, bias_te
         verdict = f"same direction, not significant at {at}"
     else:
         verdict = "not reproduced: the other way, not significant"
-    return row | {"verdict": "supported" if verdict == "reproduced" and claim.registered else verdict}
+    return row | {"verdict": verdict}
 
 
 def _seed_means_words(claim: Claim, per_seed: pd.DataFrame | None) -> str:
@@ -182,10 +186,10 @@ def _detectable_words(claim: Claim, per_seed: pd.DataFrame | None) -> str:
 
 def _seed_values(per_seed: pd.DataFrame, claim: Claim, config: str) -> np.ndarray:
     """The complete seeds' values of ``claim``'s statistic for ``config`` (an epoch never reached: K + 1): (seeds,)."""
-    seeds = per_seed[(per_seed["task"] == claim.task) & (per_seed["config"] == config)
-                     & per_seed["complete"].astype(bool)][claim.statistic].astype(float)
-    if claim.statistic.startswith("epochs_to_"):
-        seeds = seeds.fillna(PAPER_EPOCHS + 1)
+    rows = per_seed[(per_seed["task"] == claim.task) & (per_seed["config"] == config) & per_seed["complete"].astype(bool)]
+    seeds = rows[claim.statistic].astype(float)
+    if claim.statistic.startswith("epochs_to_"):  # the run's own K + 1, as the permutation tests count it
+        seeds = seeds.fillna(rows["epochs_done"].astype(float) + 1)
     return seeds.to_numpy()
 
 
@@ -411,19 +415,23 @@ def slide_q_row(per_seed: pd.DataFrame, configs: tuple[str, ...] = (HER, LINEAR_
     """Fig. 10(c)'s "the mean Q-value for the Slide task is not significantly diminished over time, regardless of
     methods": each complete FetchSlide seed's mean Q at epoch ``late`` minus at ``early`` (``q_mean_at_<epoch>``),
     both configurations' seeds pooled, an exact two-sided sign-flip permutation test of their mean; the critic's
-    bias on real goals (Q minus the true return) over the same epochs beside it. None without two seeds."""
+    bias on real goals (Q minus the true return) over the same epochs beside it. A seed without both Q values is left
+    out (the seeds counted say so). None without two seeds."""
     seeds = pd.concat([_complete(per_seed, "slide", config) for config in configs])
     q_columns, bias_columns = (f"q_mean_at_{early}", f"q_mean_at_{late}"), (f"bias_real_mean_at_{early}",
                                                                            f"bias_real_mean_at_{late}")
-    if len(seeds) < 2 or any(column not in seeds.columns for column in (*q_columns, *bias_columns)):
+    if any(column not in seeds.columns for column in (*q_columns, *bias_columns)):
+        return None
+    seeds = seeds.dropna(subset=list(q_columns))
+    if len(seeds) < 2:
         return None
     change = (seeds[q_columns[1]] - seeds[q_columns[0]]).to_numpy(float)
     from scipy import stats  # most of a second to import: only when computing
     test = stats.permutation_test((change,), np.mean, permutation_type="samples", vectorized=True,
                                   alternative="two-sided", n_resamples=2 ** len(change), random_state=0)
     diminished = test.pvalue < ALPHA and change.mean() < 0
-    per_config = "; ".join(f"{config} {_complete(per_seed, 'slide', config)[q_columns[0]].mean():.3g} -> "
-                           f"{_complete(per_seed, 'slide', config)[q_columns[1]].mean():.3g}" for config in configs)
+    per_config = "; ".join(f"{config} {seeds.loc[seeds['config'] == config, q_columns[0]].mean():.3g} -> "
+                           f"{seeds.loc[seeds['config'] == config, q_columns[1]].mean():.3g}" for config in configs)
     bias = seeds[list(bias_columns)].mean()
     return {"task": "slide", "claim": "the mean Q-value is not significantly diminished over time, whatever the method",
             "paper": "Fig. 10(c)",

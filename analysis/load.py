@@ -224,8 +224,8 @@ def learner_label(learner: str) -> str:
 
 def _config_order(run: dict[str, Any]) -> tuple:
     """Sort key: DDPG first; then HER, ARCHER and other constants, linear, exponential, success and
-    the other kinds (hersd.contract.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by eps, beta1, beta2,
-    K (the paper's first)."""
+    the other kinds (hersd.contract.schedules.SCHEDULES' order); MEP after plain; HER's weights first; then by lambda_r,
+    lambda_h (higher first), eps, beta1, beta2, K (the paper's first)."""
     weights_rank = 0 if (run["lambda_r"], run["lambda_h"]) == HER_WEIGHTS else 1
     return (run["learner"] != PAPER_LEARNER, run["learner"], schedule_rank(run["schedule"]), run["mep"], weights_rank,
             run["lambda_r"], -run["lambda_h"], run["eps"], run["beta1"], run["beta2"],

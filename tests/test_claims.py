@@ -123,7 +123,7 @@ def test_results_md_opens_with_the_claims_tables_of_the_committed_report():
 
 
 def per_seed_table(values: dict[str, list[float]], column: str = "final", task: str = "push") -> pd.DataFrame:
-    return pd.DataFrame([{"task": task, "config": config, "seed": seed, "complete": True, column: value}
+    return pd.DataFrame([{"task": task, "config": config, "seed": seed, "complete": True, "epochs_done": 200, column: value}
                          for config, seeds in values.items() for seed, value in enumerate(seeds)])
 
 
@@ -157,10 +157,37 @@ def test_a_hypothesis_short_of_the_seeds_it_is_judged_at_is_interim_whatever_its
                                                                                               "judged at 5 v 5")
     full = claims_table(summary_table(100, 140), permutation_table(0.01, 0.99), NO_BIAS, (one_sided,)).iloc[0]
     assert full["verdict"] == "supported"
+    more = claims_table(summary.assign(seeds=[5, 7, 3]), permutation_table(0.01, 0.99), NO_BIAS, (one_sided,)).iloc[0]
+    assert more["verdict"] == "beyond the registration at 5 v 7: judged at 5 v 5"
     judged_at = {h.claim.registered: h.claim.judged_at for h in registered_hypotheses()}
     assert judged_at == {"bf16-final": (5, 10), "bf16-speed": (5, 10), "order-final": (5, 5), "late-final": (5, 5),
                          "late-her": (5, 5), "exp-push-speed": (5, 10), "archer-decay-final": None,
                          "archer-her-final": None}
+
+
+def test_a_registered_one_sided_hypothesis_is_supported_or_not_never_contradicted():
+    """Its registration tested one direction: the other way's small p is no verdict (no second test after the data)."""
+    one_sided = Claim("push", "h: faster", "stage 3", LINEAR_025, HER, "epochs_to_0.9", registered="h")
+    rows = [claims_table(summary_table(100, 140), permutation_table(better, worse), NO_BIAS, (one_sided,)).iloc[0]
+            for better, worse in ((0.99, 0.01), (0.3, 0.7), (0.01, 0.99))]
+    assert [row["verdict"] for row in rows] == ["not supported at 5 v 5", "not supported at 5 v 5", "supported"]
+    paper = Claim("push", "faster", "Fig. 4", LINEAR_025, HER, "epochs_to_0.9")
+    assert claims_table(summary_table(100, 140), permutation_table(0.99, 0.01), NO_BIAS,
+                        (paper,)).iloc[0]["verdict"] == "contradicted"  # a claim of the paper's can be
+
+
+def test_the_seed_means_count_a_level_never_reached_as_the_runs_own_k_plus_1():
+    seeds = per_seed_table({LINEAR_025: [10, np.nan], HER: [20, 30]}, column="epochs_to_0.9").assign(epochs_done=50)
+    row = claims_table(summary_table(10, 25), permutation_table(0.3, 0.7), NO_BIAS, (FASTER,), seeds).iloc[0]
+    assert row["hersd"].endswith("; seed means 30.5 vs 25 (the test's statistic)")
+
+
+def test_a_slide_seed_without_both_q_values_is_left_out_of_the_q_claim():
+    seeds = pd.DataFrame({"task": "slide", "config": [HER] * 3 + [LINEAR_025] * 3, "complete": True,
+                          "q_mean_at_10": [-4.0] * 6, "q_mean_at_200": [-9.0, np.nan, -9.5, -9.0, -10.0, -8.5],
+                          "bias_real_mean_at_10": 30.0, "bias_real_mean_at_200": 20.0})
+    row = slide_q_row(seeds)
+    assert row["seeds"] == "5 paired" and row["p"] == pytest.approx(2 / 32) and "not diminished at 5 seeds" in row["verdict"]
 
 
 def test_a_two_sided_hypothesis_not_separated_gives_the_differences_its_seeds_would_have_separated():
