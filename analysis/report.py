@@ -60,7 +60,7 @@ from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.tensorboard_export import export_events
 from hersd.contract.errors import ConfigError, DiskFullError, block_bytes, full_disk
-from hersd.contract.runlog import replace_file
+from hersd.contract.runlog import replace_file, temporary_file
 from analysis.workers import ForkedMap
 from hersd.contract.tasks import task_rank, task_title
 
@@ -557,14 +557,20 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
 
     start = time.perf_counter()
     paths, drawing = _start_drawing(figures + study_figures, folders, fmt)
-    with drawing:  # an error below stops the workers
-        analysis = with_statistics(analysis)  # while the workers draw
-        timings["statistics"] = time.perf_counter() - start
-        tables, critic_tests, claims = _report_tables(table, analysis)
-        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns=["run", "error"])}, out / "tables")
-        written += _write_studies(studies, out / "search")
-        timings["tables"] = time.perf_counter() - start - timings["statistics"]
-        images = drawing.results()
+    try:
+        with drawing:  # an error below stops the workers
+            analysis = with_statistics(analysis)  # while the workers draw
+            timings["statistics"] = time.perf_counter() - start
+            tables, critic_tests, claims = _report_tables(table, analysis)
+            written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns=["run", "error"])},
+                                    out / "tables")
+            written += _write_studies(studies, out / "search")
+            timings["tables"] = time.perf_counter() - start - timings["statistics"]
+            images = drawing.results()
+    except BaseException:
+        for path in paths:  # a worker stopped in the middle of writing a figure leaves its temporary file
+            temporary_file(path).unlink(missing_ok=True)
+        raise
     timings["figures"] = time.perf_counter() - start
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 

@@ -6,26 +6,17 @@ modules), so the jobs themselves are never pickled, only their results. With one
 job, or no ``fork`` on the platform, the jobs run in this process instead, with the same results.
 While the children run, the parent's objects are frozen out of garbage collection (:func:`gc.freeze`): the
 children's collections then skip the parent's many objects (the imported modules' and the tables').
-A child stopped early (an error in the parent, :meth:`ForkedMap.close`) exits through Python's own unwinding, so a
-file it was writing through a temporary file leaves none behind.
 """
 
 from __future__ import annotations
 
 import gc
 import multiprocessing
-import signal
-import sys
 from typing import Any, Callable, Sequence
 
 from hersd.contract.cores import available_cores
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # what the forked children inherit
-
-
-def _exit_when_stopped() -> None:
-    """A worker's SIGTERM (``Pool.terminate``) as SystemExit: the job's ``finally`` and ``except`` blocks run."""
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
 
 
 def _run_job(index: int) -> Any:
@@ -45,7 +36,7 @@ class ForkedMap:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             _JOBS = (function, items)
             gc.freeze()  # unfrozen in results()
-            self._pool = multiprocessing.get_context("fork").Pool(workers, _exit_when_stopped)  # the children fork here
+            self._pool = multiprocessing.get_context("fork").Pool(workers)  # the children fork here
             self._pending = self._pool.map_async(_run_job, range(len(items)), chunksize=1)
 
     def results(self) -> list[Any]:

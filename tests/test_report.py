@@ -381,6 +381,35 @@ def test_a_full_disk_while_the_report_writes_is_one_line_naming_the_file_and_its
     assert err.strip().endswith(" free; free some and run hersd-report again")
 
 
+def test_an_error_while_a_worker_writes_a_figure_leaves_no_temporary_file(hand_sized, tmp_path, monkeypatch):
+    """The workers write figures through temporary files; the parent's error (here its tables) stops them, one in the
+    middle of its write (held there): its temporary file goes too."""
+    import time
+
+    import analysis.report as report
+    from hersd.contract.runlog import replace_file, temporary_file
+
+    def slow_write(path, data):  # a figure's write: its temporary file, then held there until it is stopped
+        if path.suffix == ".png":
+            temporary_file(path).write_bytes(b"half")
+            time.sleep(60)
+        replace_file(path, data.encode() if isinstance(data, str) else data, sync=False)
+        return path
+
+    def failing_tables(tables, folder):
+        started = time.monotonic()
+        while not list((tmp_path / "report" / "figures").glob("*.tmp")) and time.monotonic() - started < 30:
+            time.sleep(0.05)
+        raise RuntimeError("the tables failed")
+
+    monkeypatch.setattr(report, "write_whole", slow_write)
+    monkeypatch.setattr(report, "_write_tables", failing_tables)
+    monkeypatch.setattr("analysis.workers.available_cores", lambda: 2)  # figures drawn in worker processes
+    with pytest.raises(RuntimeError, match="the tables failed"):
+        report.build_report(hand_sized, tmp_path / "report")
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
 def test_a_run_that_stopped_with_an_error_is_failed_in_the_tables_page_and_terminal(tmp_path, capsys):
     """A crashed run with an error.log beside its log was shown "in progress (epoch 1 of 2)"."""
     write_run(tmp_path / "done", make_config(epochs=2), np.ones(2))

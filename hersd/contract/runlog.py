@@ -220,12 +220,17 @@ def encode_log(messages: Iterable[LoggedMessage]) -> bytes:
     return buffer.getvalue()
 
 
+def temporary_file(path: Path) -> Path:
+    """The temporary file :func:`replace_file` writes ``path`` through by default: ``<name>.tmp`` beside it."""
+    return path.with_name(path.name + ".tmp")
+
+
 def replace_file(path: Path, data: bytes, temporary: Path | None = None, sync: bool = True) -> None:
     """Write ``data`` to ``path`` atomically: a temporary file next to it (``<name>.tmp`` unless ``temporary`` is
     given), fsync, rename, fsync of the folder (both fsyncs left out with ``sync=False``, for files rewritten whole
     by the next command: a report's). A write that fails leaves ``path`` as it was and no temporary file; on a full
     disk it raises :class:`DiskFullError` (one line: the file, the bytes it needs, those free)."""
-    temporary = temporary or path.with_name(path.name + ".tmp")
+    temporary = temporary or temporary_file(path)
     try:
         with open(temporary, "wb") as stream:
             stream.write(data)
