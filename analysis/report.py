@@ -40,9 +40,10 @@ import os
 import shutil
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 import pandas as pd
 
@@ -465,6 +466,18 @@ def _load(folder: Path, tasks, algos, timings: dict[str, float]) -> RunTable:
     return table
 
 
+@contextmanager
+def _no_temporaries_left(paths: list[Path]) -> Iterator[None]:
+    """On an error inside, once the workers have stopped: remove the temporary file of each of ``paths`` (a worker
+    stopped in the middle of writing a figure leaves its own)."""
+    try:
+        yield
+    except BaseException:
+        for path in paths:
+            temporary_file(path).unlink(missing_ok=True)
+        raise
+
+
 def _start_drawing(figures: list[ReportFigure], folders: list[Path], fmt: str) -> tuple[list[Path], ForkedMap]:
     """Start drawing and saving every figure (``figures[i]`` into ``folders[i]``), one worker process per core
     -> (the files, the ForkedMap whose ``results()`` are the ``<img>`` of each)."""
@@ -557,20 +570,14 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
 
     start = time.perf_counter()
     paths, drawing = _start_drawing(figures + study_figures, folders, fmt)
-    try:
-        with drawing:  # an error below stops the workers
-            analysis = with_statistics(analysis)  # while the workers draw
-            timings["statistics"] = time.perf_counter() - start
-            tables, critic_tests, claims = _report_tables(table, analysis)
-            written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns=["run", "error"])},
-                                    out / "tables")
-            written += _write_studies(studies, out / "search")
-            timings["tables"] = time.perf_counter() - start - timings["statistics"]
-            images = drawing.results()
-    except BaseException:
-        for path in paths:  # a worker stopped in the middle of writing a figure leaves its temporary file
-            temporary_file(path).unlink(missing_ok=True)
-        raise
+    with _no_temporaries_left(paths), drawing:  # an error below stops the workers, then removes what they left
+        analysis = with_statistics(analysis)  # while the workers draw
+        timings["statistics"] = time.perf_counter() - start
+        tables, critic_tests, claims = _report_tables(table, analysis)
+        written = _write_tables({**tables, "runs": _run_list(analysis).drop(columns=["run", "error"])}, out / "tables")
+        written += _write_studies(studies, out / "search")
+        timings["tables"] = time.perf_counter() - start - timings["statistics"]
+        images = drawing.results()
     timings["figures"] = time.perf_counter() - start
     log(f"drew {_count(len(paths), 'figure')} in {timings['figures']:.1f} s")
 
