@@ -186,7 +186,7 @@ def _detectable_words(claim: Claim, per_seed: pd.DataFrame | None) -> str:
 
 def _seed_values(per_seed: pd.DataFrame, claim: Claim, config: str) -> np.ndarray:
     """The complete seeds' values of ``claim``'s statistic for ``config`` (an epoch never reached: K + 1): (seeds,)."""
-    rows = per_seed[(per_seed["task"] == claim.task) & (per_seed["config"] == config) & per_seed["complete"].astype(bool)]
+    rows = _complete(per_seed, claim.task, config)
     seeds = rows[claim.statistic].astype(float)
     if claim.statistic.startswith("epochs_to_"):  # the run's own K + 1, as the permutation tests count it
         seeds = seeds.fillna(rows["epochs_done"].astype(float) + 1)
