@@ -62,7 +62,7 @@ from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.tensorboard_export import export_events
 from hersd.contract.errors import ConfigError, DiskFullError, block_bytes, full_disk
 from hersd.contract.runlog import replace_file, temporary_file
-from analysis.workers import ForkedMap
+from analysis.workers import ForkedMap, WorkerLostError
 from hersd.contract.tasks import task_rank, task_title
 
 if TYPE_CHECKING:
@@ -102,7 +102,7 @@ TABLE_NOTES = {
                 "<b>IQM</b>: interquartile mean over seeds of final success, with its 95 % percentile-bootstrap "
                 "interval (seeded, 2000 resamples). <b>P(improvement over HER)</b>: P(X &gt; Y) + "
                 "0.5 P(X = Y) for X a seed's final success and Y a seed's of HER (eps = 0.8, no MEP) with the same "
-                "learner and number of epochs K, over all pairs. Column names of tables/summary.csv: "
+                "learner, number of epochs K and variant (precision=bf16, update=fast), over all pairs. Column names of tables/summary.csv: "
                 "docs/ANALYSIS.md."),
     "aggregate": ("One row per configuration (one K) across the tasks it was run on: IQM of all its seeds' final "
                   "success; the bootstrap resamples seeds within each task (stratified); P(improvement over HER) is "
@@ -659,9 +659,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ReportInputError as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
+    except WorkerLostError as err:
+        print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
+        return 1
     except (DiskFullError, OSError) as err:  # a full disk: one line naming the file and the bytes it needs
         if not full_disk(err):
-            raise
+            return _unwritable(err)
         if not isinstance(err, DiskFullError):  # a folder it could not make: one block of its device
             path = Path(err.filename or (args.out if args.out is not None else args.folder / "report"))
             err = DiskFullError(path, block_bytes(path))
@@ -673,6 +676,18 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"metrics {timings['metrics']:.1f} s, figures {timings['figures']:.1f} s (meanwhile statistics "
           f"{timings['statistics']:.1f} s, tables {timings['tables']:.1f} s), writing {timings['writing']:.1f} s)")
     return 0
+
+
+def _unwritable(err: BaseException) -> int:
+    """An error writing the report but a full disk: one line naming the file, exit 2 (an earlier report's folder
+    read-only, or another user's); any other error is raised."""
+    if not isinstance(err, OSError) or err.filename is None:
+        raise err
+    path = Path(err.filename)
+    shown = path.with_name(path.name.removesuffix(".tmp")) if path.suffix == ".tmp" else path
+    print(f"hersd-report: error: cannot write the report's file {shown}: {err.strerror}; give --out a folder you "
+          "can write to", file=sys.stderr)
+    return 2
 
 
 def _tensorboard(args: argparse.Namespace) -> int:

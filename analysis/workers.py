@@ -6,6 +6,7 @@ modules), so the jobs themselves are never pickled, only their results. With one
 job, or no ``fork`` on the platform, the jobs run in this process instead, with the same results.
 While the children run, the parent's objects are frozen out of garbage collection (:func:`gc.freeze`): the
 children's collections then skip the parent's many objects (the imported modules' and the tables').
+A worker that dies before its jobs are done (killed, out of memory) is :class:`WorkerLostError`, not a wait forever.
 """
 
 from __future__ import annotations
@@ -17,6 +18,12 @@ from typing import Any, Callable, Sequence
 from hersd.contract.cores import available_cores
 
 _JOBS: tuple[Callable[[Any], Any], Sequence[Any]] | None = None  # what the forked children inherit
+POLL_SECONDS = 0.2  # how often the parent, waiting, checks that no worker died
+
+
+class WorkerLostError(RuntimeError):
+    """A worker process stopped before its jobs were done (killed, or its job exited the process): its job is lost,
+    which the pool itself would wait for forever."""
 
 
 def _run_job(index: int) -> Any:
@@ -37,12 +44,20 @@ class ForkedMap:
             _JOBS = (function, items)
             gc.freeze()  # unfrozen in results()
             self._pool = multiprocessing.get_context("fork").Pool(workers)  # the children fork here
+            self._workers = list(self._pool._pool)  # the pool replaces a worker that dies, losing its job
             self._pending = self._pool.map_async(_run_job, range(len(items)), chunksize=1)
 
     def results(self) -> list[Any]:
         if self._pool is None:
             return [self._function(item) for item in self._items]
         try:
+            while not self._pending.ready():
+                self._pending.wait(POLL_SECONDS)
+                lost = [worker.exitcode for worker in self._workers if worker.exitcode is not None]
+                if lost and not self._pending.ready():
+                    status = (f"killed by signal {-lost[0]}: out of memory?" if lost[0] < 0
+                              else f"exit status {lost[0]}")
+                    raise WorkerLostError(f"a worker process stopped before finishing its jobs ({status})")
             results = self._pending.get()
             self._pool.close()  # every job is done: let the workers exit
             return results

@@ -433,3 +433,39 @@ def test_a_run_that_stopped_with_an_error_is_failed_in_the_tables_page_and_termi
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "1 in progress, 1 failed" in page and "in progress (epoch 1 of 2)" in page
     assert "failed (epoch 1 of 2): OSError: [Errno 28] No space left on device" in page
+
+
+def test_a_worker_killed_while_drawing_is_one_line_not_a_hang(hand_sized, tmp_path, monkeypatch, capsys):
+    """A worker killed as it draws (the OOM killer, kill -9) lost its figure and the report waited for it forever;
+    now it ends with one line, exit 1, and no temporary file."""
+    import os
+
+    import analysis.report as report
+
+    def killed(job):
+        report.temporary_file(job[1]).write_bytes(b"half")  # killed in the middle of its write
+        os._exit(137)
+
+    monkeypatch.setattr("analysis.workers.available_cores", lambda: 2)  # figures drawn in worker processes
+    monkeypatch.setattr(report, "_render", killed)
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "report")]) == 1
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line == ("hersd-report: error: a worker process stopped before finishing its jobs (exit status 137); "
+                    "run hersd-report again")
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_a_report_folder_it_cannot_write_into_is_one_line_with_exit_2(hand_sized, tmp_path, monkeypatch, capsys):
+    """An earlier report's tables/ (or figures/) read-only (another user's, a read-only mount) was a traceback."""
+    import errno
+
+    import analysis.report as report
+
+    def refused(path, data, sync=True):
+        raise OSError(errno.EROFS, "Read-only file system", str(report.temporary_file(path)))
+
+    monkeypatch.setattr(report, "replace_file", refused)
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "report")]) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith(f"hersd-report: error: cannot write the report's file {tmp_path / 'report'}/")
+    assert line.endswith(": Read-only file system; give --out a folder you can write to")

@@ -39,3 +39,25 @@ def test_workers_stopped_after_every_map_never_hang_the_parent():
                "    assert ForkedMap(abs, list(range(-3, 3)), workers=2).results() == [3, 2, 1, 0, 1, 2]\n")
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+def test_a_worker_that_dies_is_an_error_not_a_hang():
+    """A worker killed as it works (the OOM killer, ``kill -9``, a job's module calling sys.exit or os._exit) lost
+    its job: the pool started another worker and waited for that job forever, the report hanging. Now ``results``
+    raises WorkerLostError naming the worker's exit, and no worker is left."""
+    import subprocess
+    import sys
+
+    program = ("import os, multiprocessing\n"
+               "from analysis.workers import ForkedMap, WorkerLostError\n"
+               "try:\n"
+               "    ForkedMap(lambda x: os._exit(9) if x == 1 else x, [0, 1, 2, 3], workers=2).results()\n"
+               "except WorkerLostError as err:\n"
+               "    print(err)\n"
+               "assert multiprocessing.active_children() == []\n")
+    try:
+        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the parent hung waiting for the job of a worker that died")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "a worker process stopped before finishing its jobs (exit status 9)"
