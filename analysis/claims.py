@@ -392,8 +392,11 @@ def spread_row(per_seed: pd.DataFrame, task: str = "push", config: str = LINEAR_
     means (exact where the splits number at most EXACT_SPLITS); None without two complete seeds a side."""
     if any(f"smoothed_at_{epoch}" not in per_seed.columns for epoch in SPREAD_EPOCHS):
         return None
-    spreads = [seed_spread(_complete(per_seed, task, name)) for name in (config, versus)]
-    if min(len(spread) for spread in spreads) < 2 or any(np.isnan(spread).any() for spread in spreads):
+    seeds_of = [_complete(per_seed, task, name) for name in (config, versus)]
+    if min(len(seeds) for seeds in seeds_of) < 2:  # checked before any median: an empty one only warns
+        return None
+    spreads = [seed_spread(seeds) for seeds in seeds_of]
+    if any(np.isnan(spread).any() for spread in spreads):
         return None
     seeds = tuple(len(spread) for spread in spreads)
     from scipy import stats  # most of a second to import: only when computing

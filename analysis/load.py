@@ -417,7 +417,10 @@ class LogReading:
         logs = [by_path[path] for path in self.paths]
         readable, copies = one_log_per_run([log for log in logs if isinstance(log, ReadLog)])
         if not readable:
-            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable")
+            reasons = [log for log in logs if isinstance(log, str)]
+            first = f" ({reasons[0]}{f'; and {len(reasons) - 1} more' if len(reasons) > 1 else ''})" if reasons else ""
+            raise ReportInputError(f"none of the {len(logs)} {LOG_NAME} files under {self.folder} is readable{first}; "
+                                   "give a folder of hersd run logs")
         kept = [log for log in readable
                 if (tasks is None or log.row["task"] in tasks) and (algos is None or log.row["algo"] in algos)]
         if not kept:
@@ -558,9 +561,12 @@ def _tables(logs: list[ReadLog], skipped: list[str]) -> RunTable:
     labels = [label(index, row["total_epochs"]) if len(epochs_of[name]) > 1 else name
               for index, (row, name) in enumerate(zip(rows, labels))]
     # Within a task, seeds of one label must share every setting; where they do not, say what
-    # differs. Across tasks a label (K included) may differ in budget per epoch (cycles): tasks are strata.
+    # differs. Across tasks a label (K included) may differ in the task's own settings (task.*: its env, its
+    # budget per epoch): tasks are strata; in any other setting it may not (the aggregate table pools a label's tasks).
     groups = [(row["task"], label) for row, label in zip(rows, labels)]
     labels = _distinguish(labels, [log.settings for log in logs], groups)
+    labels = _distinguish(labels, [{key: value for key, value in log.settings.items() if not key.startswith("task.")}
+                                   for log in logs], labels)
     for row, label, log, varied in zip(rows, labels, logs, variants):
         row.update(config=label, variant=" ".join(varied), defaults_id=defaults_id(log.settings))
     order = sorted({row["config"]: row for row in rows}.values(), key=lambda r: (_config_order(r), r["config"]))

@@ -274,9 +274,10 @@ def probability_of_improvement(candidate: np.ndarray, baseline: np.ndarray) -> f
 
 def her_baselines(runs: pd.DataFrame) -> dict[tuple[str, str], str]:
     """(task, config) -> the configuration its probability of improvement compares with: the
-    HER configuration (constant HER_EPS, HER's reward weights, no MEP) of the same task, learner
-    and K. Left out when there is none, or more than one (they differ in other settings)."""
-    setup = ["task", "learner", "total_epochs"]
+    HER configuration (constant HER_EPS, HER's reward weights, no MEP) of the same task, learner, K and variant
+    (``HER precision=bf16`` for a bf16 run: :func:`analysis.load.variant`). Left out when there is none, or more than
+    one (they differ in other settings)."""
+    setup = ["task", "learner", "total_epochs", "variant"]
     her = runs[runs["constant_rate"] & (runs["eps"] == HER_EPS) & (runs["lambda_r"] == HER_WEIGHTS[0])
                & (runs["lambda_h"] == HER_WEIGHTS[1]) & ~runs["mep"].astype(bool)]
     her_configs = {key: set(group["config"].astype(str)) for key, group in her.groupby(setup, observed=True)}

@@ -222,6 +222,15 @@ def test_the_seed_spread_claim_tests_the_spreads_two_sided_exactly():
         "contradicted"
 
 
+@pytest.mark.filterwarnings("error")
+def test_the_seed_spread_claim_without_an_arms_seeds_is_no_row_and_no_warning():
+    """A folder without HER's seeds (a one-run report): no row, and no numpy warning of an empty median."""
+    curves = {LINEAR_025: [0.5, 0.51, 0.49]}
+    seeds = pd.concat([per_seed_table(curves, column=f"smoothed_at_{epoch}") for epoch in (50, 100, 150, 200)],
+                      axis=1).loc[:, lambda table: ~table.columns.duplicated()]
+    assert spread_row(seeds) is None
+
+
 def test_the_slide_q_claim_is_a_paired_two_sided_sign_flip_test_over_both_methods_seeds():
     seeds = pd.DataFrame({"task": "slide", "config": [HER] * 3 + [LINEAR_025] * 3, "complete": True,
                           "q_mean_at_10": [-4.0] * 6, "q_mean_at_200": [-9.0, -8.0, -9.5, -9.0, -10.0, -8.5],

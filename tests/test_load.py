@@ -140,6 +140,36 @@ def test_truncated_log_keeps_complete_epochs_and_garbage_is_skipped(tmp_path, ca
                    "warning: damaged log cut/run.mcap: read its 3 epochs before the damage"]
 
 
+def test_a_label_is_one_setup_across_tasks_but_for_the_tasks_own_settings(tmp_path):
+    """The aggregate table pools a label's tasks: HER on push at another actor_lr than HER on slide is two
+    labels, each naming its value; a task's own settings (task.*: its budget per epoch) keep one label."""
+    import dataclasses
+    for seed in (0, 1):
+        push = make_config(seed=seed)
+        push = dataclasses.replace(push, ddpg=dataclasses.replace(push.ddpg, actor_lr=0.01))
+        slide = make_config(task="slide", seed=seed)
+        pick = make_config(task="pick_and_place", seed=seed)
+        pick = dataclasses.replace(pick, task=dataclasses.replace(pick.task, cycles_per_epoch=7))
+        for name, config in (("push", push), ("slide", slide), ("pick", pick)):
+            write_run(tmp_path / f"{name}{seed}", config, np.linspace(0, 1, 6))
+    runs = load_runs(tmp_path).runs
+    labels = runs.groupby("task", observed=True)["config"].agg(lambda names: set(names.astype(str)))
+    assert labels.to_dict() == {"push": {"HER (ddpg.actor_lr=0.01)"}, "slide": {"HER (ddpg.actor_lr=0.001)"},
+                                "pick_and_place": {"HER (ddpg.actor_lr=0.001)"}}
+
+
+def test_a_folder_of_unreadable_logs_only_says_why_in_its_one_line(tmp_path, capsys):
+    for name in ("empty", "garbage"):
+        (tmp_path / name).mkdir()
+    (tmp_path / "empty" / "run.mcap").write_bytes(b"")
+    (tmp_path / "garbage" / "run.mcap").write_bytes(b"not an mcap file" * 10)
+    assert report_main([str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"hersd-report: error: none of the 2 run.mcap files under {tmp_path}")
+    assert "(empty/run.mcap: " in err[0] and "; and 1 more)" in err[0] and err[0].endswith("hersd run logs")
+    assert not (tmp_path / "report").exists()
+
+
 def test_loaded_epochs_of_complete_truncated_and_resumed_logs(tmp_path):
     """Each completed epoch counts once: a truncated log up to its damage, a resumed run's
     rewritten epoch with its later value."""
@@ -350,3 +380,24 @@ def test_runs_whose_class_cannot_be_imported_are_reported_from_their_logs(tmp_pa
     assert line.startswith("schedule class gone_steps_load.KStep cannot be imported") and "3 run logs reported" in line
     analysis = metrics.analyse(table.runs, table.epochs, window=1)
     assert "kstep high=0.9 low=0.5 k0=1 K=2" in set(analysis.summary["config"])
+
+
+def test_a_schedule_module_that_exits_as_it_is_imported_is_one_warning_not_the_reports_end(tmp_path, monkeypatch):
+    """A module calling sys.exit() at import (a script) ended the report silently with its exit status, or, with
+    the logs read in worker processes, hung it. Its runs are reported from their logs, with the fix-it line."""
+    write_run(tmp_path / "her", make_config(), np.zeros(6))
+    record = config_record(make_config())
+    record["schedule"] = {"kind": "exiting_steps_load.Step", "k0": 3}
+    write_run(tmp_path / "step", make_config(seed=1), np.zeros(3), complete=False,  # in progress: its curve asks
+              meta={"config": {**record, "seed": 1}})                               # the class for epochs to come
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "exiting_steps_load.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    table = load_runs(tmp_path)
+    (line,) = table.missing_schedules
+    assert line.startswith("schedule class exiting_steps_load.Step: importing exiting_steps_load raised SystemExit: 3")
+    assert line.endswith("fix that module for the class's own label and a check of its rates")
+    assert table.runs.set_index("path").loc["step/run.mcap", "config"] == "step k0=3"
+    lines = metrics.schedule_curves(table.runs, table.epochs)  # Fig. 1
+    assert lines.loc[lines["line"].str.contains("step k0=3"), "epoch"].tolist() == [1, 2, 3]  # the logged epochs
+    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0  # its figures too

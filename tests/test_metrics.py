@@ -230,6 +230,26 @@ def test_aggregate_pools_tasks(analysed):
     assert her["iqm"] == pytest.approx((0.5 + 0.8 + 2.6 / 3) / 3)
 
 
+def test_a_variant_of_her_does_not_take_hers_place_as_the_baseline(tmp_path):
+    """HER and HER precision=bf16 in one task were two HER baselines, so none: every configuration of the task had
+    no P(improve on HER) (docs/RESULTS.md's FetchPush rows), and the aggregate averaged the other tasks alone. Each
+    configuration is compared with the HER of its own variant."""
+    linear = ScheduleConfig("linear", beta1=0.5)
+    finals = {"her": 0.4, "her_bf16": 1.0, "linear": 0.8, "linear_bf16": 0.8}
+    configs = {"her": make_config(), "her_bf16": make_config(), "linear": make_config(schedule=linear),
+               "linear_bf16": make_config(schedule=linear)}
+    configs["her_bf16"].precision = configs["linear_bf16"].precision = "bf16"
+    for name, config in configs.items():
+        write_run(tmp_path / name, config, np.full(config.epochs, finals[name]))
+    table = load_runs(tmp_path)
+    analysis = metrics.analyse(table.runs, table.epochs, WINDOW)
+    p_improve = analysis.summary.set_index("config")["p_improve_HER"]
+    assert p_improve["linear b1=0.5"] == 1.0  # 0.8 beats HER (0.4)
+    assert p_improve["linear b1=0.5 precision=bf16"] == 0.0  # HER in bf16 (1.0), not in fp32
+    assert p_improve["HER"] == 0.5 and p_improve["HER precision=bf16"] == 0.5
+    assert analysis.aggregate.set_index("config")["p_improve_HER"]["linear b1=0.5"] == 1.0
+
+
 def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_path):
     """A folder holding HER at K = 6 and K = 8 (labels "HER K=6", "HER K=8") and TD3
     runs: each configuration's P(improve on HER) uses the HER seeds of the same learner and K."""

@@ -10,7 +10,7 @@ from hersd.contract.plugins import class_at
 MODULES = {"__init__.py": "", "steps.py": "class Step:\n    pass\n", "broken.py": "x = (\n",
            "raising.py": "import math\nraise RuntimeError('no settings file')\n",
            "valueerror.py": "import json\n\nSETTINGS = json.loads('{')\n",
-           "needs.py": "import no_such_dependency_plugins\n"}
+           "needs.py": "import no_such_dependency_plugins\n", "script.py": "import sys\n\nsys.exit(3)\n"}
 
 
 @pytest.fixture
@@ -38,9 +38,11 @@ def test_a_class_is_found_by_its_path(user_pkg):
                                       r"fix that module$"),
     ("user_pkg_plugins.needs.X", r"raised ModuleNotFoundError: No module named 'no_such_dependency_plugins' at "
                                  r".*needs\.py:1; fix that module$"),
+    ("user_pkg_plugins.script.X", r"^schedule class user_pkg_plugins\.script\.X: importing user_pkg_plugins\.script "
+                                  r"raised SystemExit: 3 at .*script\.py:3; fix that module$"),
     ("user_pkg_plugins.steps", r"^schedule class user_pkg_plugins\.steps: user_pkg_plugins\.steps is a module; "
                                r"give <module>\.<Class>$"),
-    ("user_pkg_plugins.steps.Nope", r"has no attribute 'Nope'\); is its module on PYTHONPATH\?$"),
+    ("user_pkg_plugins.steps.Nope", r"has no attribute 'Nope'\); give the path of a class user_pkg_plugins.steps defines$"),
     ("no_such_pkg_plugins.X", r"\(No module named 'no_such_pkg_plugins'\); is its module on PYTHONPATH\?$"),
 ])
 def test_a_class_not_found_is_one_line_saying_why(user_pkg, path, line):

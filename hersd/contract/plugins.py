@@ -37,14 +37,15 @@ def class_at(path: str, what: str) -> Any:
         if err.name is None or not (module == err.name or module.startswith(f"{err.name}.")):
             raise ConfigError(_failed(what, path, module, err)) from None  # the module found, one it imports not
         raise ConfigError(f"{what} class {path} cannot be imported ({err}); is its module on PYTHONPATH?") from None
-    except Exception as err:  # the module's own code failed: a SyntaxError, an error it raises
+    except (Exception, SystemExit) as err:  # the module's own code failed: a SyntaxError, an error it raises, or
+        # a script's sys.exit() (which would end a report, or stop its worker)
         raise ConfigError(_failed(what, path, module, err)) from None
     found = getattr(found, name, None)
     if isinstance(found, types.ModuleType) or found is None and _is_module(path):
         raise ConfigError(f"{what} class {path}: {path} is a module; give <module>.<Class>")
     if found is None:
         raise ConfigError(f"{what} class {path} cannot be imported (module {module!r} has no attribute {name!r}); "
-                          "is its module on PYTHONPATH?")
+                          f"give the path of a class {module} defines")
     return found
 
 
