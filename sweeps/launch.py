@@ -20,7 +20,7 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, stop_as_ctrl_c
 from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import resolve_threads
 
@@ -28,7 +28,6 @@ if TYPE_CHECKING:  # the rest loads in the functions, inside main's Ctrl-C handl
     from omegaconf import DictConfig
 
 PROGRESS_NAME = "progress.jsonl"
-PLAN_NAME = "sweep.json"
 _composed = False  # set once the sweeper is reached: the command line composed into a config
 _hydra_full_error = "0"  # the user's HYDRA_FULL_ERROR ("1": tracebacks), restored once composed
 
@@ -93,8 +92,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
         check_writable(sweep_dir)
     except ConfigError as err:
         raise SweepError(str(err), exit_code=2) from None
-    save_specs(sweep_dir, specs)
-    (sweep_dir / PLAN_NAME).write_text(json.dumps({"runs": len(to_launch), "start": time.time()}))
+    save_specs(sweep_dir, specs, len(to_launch))  # a full disk: exit 2
     with watched_by_jobs(sweeper.launcher, len(to_launch), here=at_once is not None):  # jobs here end with this
         results = launch_jobs(sweeper, to_launch)
     report_outcomes(to_launch, results, skipped=counts["complete"])
@@ -137,16 +135,18 @@ def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:
 
 
 def launch_jobs(sweeper: Any, jobs: list[list[str]]) -> list:
-    """Launch the jobs -> their results; a submitit job that died or was cut short is a SweepError."""
+    """Launch the jobs -> their results; a submitit job, or a joblib worker, that died or was cut short is a
+    SweepError (a worker killed, by hand or the OOM killer: loky's TerminatedWorkerError, one line, not a traceback)."""
     from sweeps.plan import SweepError
     try:
         return sweeper.launcher.launch(jobs, initial_job_idx=0)
-    except Exception as err:  # noqa: BLE001 - only submitit's job errors are translated
+    except Exception as err:  # noqa: BLE001 - only submitit's and joblib's job errors are translated
         kind = type(err).__name__
-        if not type(err).__module__.startswith("submitit"):
+        if not type(err).__module__.startswith(("submitit", "joblib")):
             raise
         first_line = (str(err).strip().splitlines() or [kind])[0][:200]
         what = ("a job timed out or was cancelled (its run is resumable)" if kind == "UncompletedJobError"
+                else "a worker process died outside hersd (its run is resumable)" if kind == "TerminatedWorkerError"
                 else "a job died outside hersd")
         raise SweepError(f"{what}: {first_line}; finished runs are kept: run the same command again to resume "
                          f"the rest", exit_code=1) from None
@@ -211,6 +211,7 @@ def run_job(cfg: DictConfig) -> dict[str, Any]:
 
 def _report_progress(sweep_dir: Path, outcome: dict[str, Any], seconds: float) -> None:
     """Append this run's outcome to the sweep's progress file and print runs done / total and ETA."""
+    from sweeps.plan import PLAN_NAME
     from sweeps.status import record_progress
 
     finished = record_progress(sweep_dir / PROGRESS_NAME, {**outcome, "seconds": seconds})  # full disk: left out
@@ -258,6 +259,7 @@ def main() -> None:
     interrupt (Ctrl-C) ends with one line and exit code 130, from the start (the modules load in here); a command
     line that does not compose, with one line and exit code 2 (the traceback with ``HYDRA_FULL_ERROR=1``)."""
     global _hydra_full_error
+    stop_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, no .tmp left
     try:
         import hydra
 

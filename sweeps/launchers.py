@@ -92,9 +92,11 @@ _watching: list[str] = []  # the process this worker process watches (once per p
 def process_start(pid: int) -> str:
     """When process ``pid`` started (``/proc/<pid>/stat``'s field 22, clock ticks since boot): with the pid it names
     one process, whose pid the system may reuse once it is gone; "" where /proc is absent (not Linux), "gone" if
-    there is no such process."""
+    there is no such process or it has ended and waits to be reaped (a zombie, state Z or X: a main process killed
+    while its own parent, e.g. one reading its output until its workers close the pipes, has not waited for it)."""
     try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return "gone" if fields[0] in ("Z", "X") else fields[19]
     except FileNotFoundError:
         return "gone" if Path("/proc/self/stat").exists() else ""
     except (OSError, IndexError):

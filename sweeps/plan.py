@@ -31,7 +31,9 @@ the 300 runs of ``+grid=beta`` need 3 compositions, not 300.
 from __future__ import annotations
 
 import copy
+import json
 import pickle
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,7 +45,7 @@ from omegaconf.errors import OmegaConfBaseException
 from hersd.contract.compose import (explain_config_error, null_group, open_schedule, register_schema,
                                    register_train_schema)
 from hersd.contract.config import TrainConfig, to_train_config
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, DiskFullError
 from hersd.contract.cores import available_cores
 from hersd.contract.runspec import RunSpec, resolve
 from sweeps.hydra_private import apply_value_overrides, basic_sweeper_class, group_test, grid_overrides
@@ -66,6 +68,7 @@ class SweepConfig(TrainConfig):
 
 SWEEP_ONLY_KEYS = ("hydra", "seeds")  # a sweep's config keys that are no setting of its runs
 SPECS_NAME = "specs.pkl"  # in the sweep's folder: its jobs' resolved runs (save_specs)
+PLAN_NAME = "sweep.json"  # in the sweep's folder: how many runs it launched, and when (save_specs)
 
 
 class SweepError(RuntimeError):
@@ -120,9 +123,21 @@ def launched(run: PlannedRun, threads: int | None) -> tuple[tuple[str, ...], Run
     return (*run.job, f"threads={threads}"), run.spec.with_threads(threads)
 
 
-def save_specs(sweep_dir: Path, specs: dict[tuple[str, ...], RunSpec]) -> None:
-    """The resolved runs of a sweep's jobs (job overrides -> spec), for the jobs to take (:func:`job_spec`)."""
-    (sweep_dir / SPECS_NAME).write_bytes(pickle.dumps(specs))
+def save_specs(sweep_dir: Path, specs: dict[tuple[str, ...], RunSpec], runs: int) -> None:
+    """The resolved runs of a sweep's jobs (job overrides -> spec), for the jobs to take (:func:`job_spec`), and its
+    plan (the number of ``runs`` launched, the start time), each written whole
+    (:func:`hersd.contract.runlog.replace_file`). A full disk is a SweepError (exit 2: the file and the bytes it
+    needs, in one line; no half-written or temporary file left)."""
+    from hersd.contract.runlog import replace_file
+
+    files = {SPECS_NAME: pickle.dumps(specs), PLAN_NAME: json.dumps({"runs": runs, "start": time.time()}).encode()}
+    try:
+        for name, data in files.items():
+            replace_file(sweep_dir / name, data, sync=False)
+    except DiskFullError as err:
+        for name in files:
+            (sweep_dir / name).unlink(missing_ok=True)
+        raise SweepError(f"{err}; nothing ran yet", exit_code=2) from None
 
 
 def job_spec(cfg: DictConfig, sweep_dir: Path, job: list[str]) -> RunSpec:

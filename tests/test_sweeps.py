@@ -463,3 +463,89 @@ def test_a_launcher_yaml_alone_runs_the_smoke_grid(tmp_path):
     logs = list((tmp_path / "results").rglob("run.mcap"))
     assert "1 done" in result.stdout and len(logs) == 1 and read_run(logs[0]).complete, result.stdout + result.stderr
     assert (tmp_path / "results" / ".sweeps").exists() and list(tmp_path.rglob(".submitit"))  # submitit ran it
+
+
+def test_a_main_process_killed_but_not_yet_reaped_is_gone_to_its_workers():
+    """A sweep's main process killed (SIGTERM, SIGKILL) stays a zombie until its own parent reaps it, e.g. a
+    script reading the sweep's output until the pipes close, which its workers hold open: the workers must see it
+    gone then, not train on and idle for minutes holding those pipes (sweeps.launchers.alive)."""
+    from sweeps.launchers import alive, process_start
+
+    child = subprocess.Popen(["sleep", "60"])
+    start = process_start(child.pid)
+    try:
+        assert alive(child.pid, start)
+        child.kill()
+        os.waitid(os.P_PID, child.pid, os.WEXITED | os.WNOWAIT)  # dead, not reaped: a zombie
+        assert not alive(child.pid, start)
+    finally:
+        child.kill()
+        child.wait()
+
+
+def test_a_worker_killed_outside_hersd_ends_the_sweep_with_one_line_not_a_traceback():
+    """SIGKILL (or the OOM killer) of one joblib worker: loky raises TerminatedWorkerError in the sweep; it is one
+    line saying what happened and that the same command resumes (exit 1), like a submitit job that died."""
+    from types import SimpleNamespace
+
+    from joblib.externals.loky.process_executor import TerminatedWorkerError
+
+    from sweeps.launch import launch_jobs
+    from sweeps.plan import SweepError
+
+    def launch(jobs, initial_job_idx):
+        raise TerminatedWorkerError("A worker process managed by the executor was unexpectedly terminated. This "
+                                    "could be caused by a segmentation fault.\n\nThe exit codes of the workers are "
+                                    "{SIGKILL(-9)}")
+
+    with pytest.raises(SweepError) as raised:
+        launch_jobs(SimpleNamespace(launcher=SimpleNamespace(launch=launch)), [["seed=0"]])
+    message = str(raised.value)
+    assert raised.value.exit_code == 1 and len(message.splitlines()) == 1
+    assert "worker" in message and "run the same command again" in message
+
+
+FULL_DISK_AT_START = """
+import sys
+import pytest
+from helpers import full_disk_writes
+from sweeps.launch import main
+
+full_disk_writes(pytest.MonkeyPatch(), "specs.pkl*")
+sys.argv = ["hersd-sweep", *sys.argv[1:]]
+main()
+"""
+
+
+def test_a_full_disk_before_the_first_run_is_one_line_with_exit_2_and_leaves_no_file(tmp_path):
+    """The disk fills as the sweep writes its plan (specs.pkl, before any run): one line naming the file and the
+    bytes it needs, exit 2, and no half-written or temporary file left in the sweep's folder."""
+    args = ["+grid=smoke", "schedule=constant", "seeds=1", "epochs=1", *TINY, "hydra/launcher=basic",
+            f"results_dir={tmp_path}"]
+    full = subprocess.run([sys.executable, "-c", FULL_DISK_AT_START, *args], capture_output=True, text=True,
+                          timeout=600, cwd=Path(__file__).parent)
+    err = full.stderr.strip()
+    assert full.returncode == 2 and len(err.splitlines()) == 1, full.stdout[-2000:] + full.stderr[-3000:]
+    assert err.startswith("hersd-sweep: error: no space left on the device of ") and "specs.pkl" in err
+    assert not [path for path in tmp_path.rglob("*") if path.is_file()]  # no specs.pkl, no .tmp
+    assert not list(tmp_path.rglob("run.mcap"))
+
+
+def test_sigterm_to_the_sweep_ends_it_as_ctrl_c_does_with_one_line_and_no_temporary_file(tmp_path):
+    """``kill PID`` (SIGTERM) of a sweep training in its own process (one run at a time): one line, exit 130, no
+    ``.tmp`` file of a write it cut short, as a Ctrl-C; the same command then finishes the runs."""
+    args = ["+grid=smoke", "schedule=constant", "seeds=1", "epochs=6", *TINY, "hydra.launcher.n_jobs=1", "quiet=false",
+            f"results_dir={tmp_path}"]
+    proc = subprocess.Popen([*SWEEP, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    for line in proc.stdout:
+        if line.startswith("epoch    2/"):
+            os.kill(proc.pid, signal.SIGTERM)
+            break
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["hersd-sweep: interrupted; finished runs and epochs are kept: re-run the "
+                                        "same command to resume"]
+    assert not group_alive(proc.pid) and not list(tmp_path.rglob("*.tmp"))
+    result = sweep(*args)
+    assert "1 resumed" in result.stdout and all(read_run(p).complete for p in tmp_path.rglob("run.mcap"))

@@ -107,18 +107,20 @@ def test_kill_9_then_same_command_finishes_with_uninterrupted_metrics(tmp_path):
     pd.testing.assert_frame_equal(metrics(log_path), metrics(reference))
 
 
-def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resumes(tmp_path):
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl_c", "kill"])
+def test_ctrl_c_ends_a_run_with_one_line_and_exit_130_then_the_same_command_resumes(tmp_path, stop):
+    """Ctrl-C, or ``kill PID`` (SIGTERM, as a supervisor stops it): one line, exit 130, no temporary file left."""
     args = [*TINY, "epochs=3", f"results_dir={tmp_path / 'cut'}", "quiet=false"]
     proc = subprocess.Popen([sys.executable, "-m", "hersd.engine.cli", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     for line in proc.stdout:
         if line.startswith("epoch") and line.split()[1].startswith("1/"):
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(stop)
             break
     _, err = proc.communicate(timeout=120)
     log_path = next((tmp_path / "cut").rglob("run.mcap"))
-    assert proc.returncode == 130
+    assert proc.returncode == 130 and not list(tmp_path.rglob("*.tmp"))
     assert err.strip() == (f"hersd-train: interrupted; the finished epochs are kept in {log_path.parent}: "
                            "re-run the same command to resume")
     assert 1 <= len(read_run(log_path).epochs) <= 3

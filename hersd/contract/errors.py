@@ -43,6 +43,18 @@ def interrupted(err: BaseException) -> bool:
     return any(isinstance(link, KeyboardInterrupt) for link in _chain(err))
 
 
+def stop_as_ctrl_c() -> None:
+    """From now on in this process, SIGTERM (``kill PID``, a supervisor stopping it) ends it as a Ctrl-C does: a
+    KeyboardInterrupt, so the command's one line, exit 130 and clean-up (no ``.tmp`` left) hold for it too. Only
+    for a command's own process: never for pool workers (a handler there can miss the signal as a worker blocks)."""
+    import signal
+
+    def _interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
 def _chain(err: BaseException | None) -> Iterator[BaseException]:
     """``err`` and the errors it was raised from or while handling, each once."""
     seen: set[int] = set()
