@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 from unittest import mock
 
@@ -66,6 +67,24 @@ def test_a_dead_holders_pid_is_no_holder(tmp_path):
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     (tmp_path / LOCK_NAME).write_text(ended.stdout)  # as a holder killed with -9 leaves it
     assert RunFolder(tmp_path).holder() is None
+
+
+def test_a_killed_holder_its_parent_has_not_reaped_is_no_holder(tmp_path):
+    """A holder killed while its parent is not waiting for it stays a zombie: its lock is closed, so no run is
+    "running" there (a dry run said so, pid and all, until the parent ended)."""
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (tmp_path / LOCK_NAME).write_text(f"{child.pid}\n")
+        assert RunFolder(tmp_path).holder() == child.pid
+        os.kill(child.pid, 9)
+        for _ in range(100):  # until the kernel has made it a zombie; not reaped: no wait() yet
+            if Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
+                break
+            time.sleep(0.05)
+        assert RunFolder(tmp_path).holder() is None
+    finally:
+        child.kill()
+        child.wait()
 
 
 def test_a_run_directory_is_named_by_task_algo_schedule_seed_and_hash():

@@ -183,13 +183,24 @@ class RunFolder:
             pid = int((self.path / LOCK_NAME).read_text().strip())
         except (OSError, ValueError):
             return None
-        try:
-            os.kill(pid, 0)  # signal 0: only asks whether the process exists
-        except ProcessLookupError:  # it died without releasing (kill -9): the lock is free
-            return None
-        except PermissionError:  # alive, another user's
-            pass
-        return pid
+        return pid if pid_alive(pid) else None  # killed without releasing (kill -9): the lock is free
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` of this host runs: not gone, and not a zombie (killed, its parent not yet waiting
+    for it: its files, and so its locks, are closed); another user's counts as running."""
+    try:
+        os.kill(pid, 0)  # signal 0: only asks whether the process exists
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except FileNotFoundError:  # no procfs (macOS): the signal's answer; or it ended just now
+        return not Path("/proc/self/stat").exists()
+    except (OSError, IndexError):
+        return False
 
 
 def error_line(text: str) -> str:

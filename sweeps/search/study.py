@@ -6,12 +6,10 @@ workers."""
 from __future__ import annotations
 
 import json
-import os
 import socket
 import time
 import warnings
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 import optuna
@@ -21,6 +19,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from hersd.contract.errors import ConfigError
 from hersd.contract.study import RETRY_OF_ATTR, SETTINGS_ATTR, TRAIN_OVERRIDES_ATTR
+from hersd.contract.runstore import pid_alive
 from sweeps.search.config import SamplerConfig, enqueued_params
 from sweeps.search.optuna_private import fixed_params, seed_tpe
 from sweeps.search.space import space_record
@@ -171,26 +170,10 @@ def first_error(study: optuna.Study, first_trial: int) -> str | None:
     return f"trial {failed[0].number}: {reason}"
 
 
-def _pid_alive(pid: int) -> bool:
-    """Whether process ``pid`` of this host runs (a zombie, killed but not reaped, does not)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    if not Path("/proc/self/stat").exists():  # no procfs (macOS): trust the signal check
-        return True
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return False
-
-
 def stale_reason(trial: FrozenTrial, now: float, stale_after_seconds: float) -> str | None:
     """Why a RUNNING trial is lost (its worker on this host is gone, or no heartbeat for too long), or None."""
     host, _, pid = str(trial.user_attrs.get("worker", "")).rpartition(":")
-    if host == socket.gethostname() and pid.isdigit() and not _pid_alive(int(pid)):
+    if host == socket.gethostname() and pid.isdigit() and not pid_alive(int(pid)):
         return f"worker {host}:{pid} is gone"
     heartbeat = trial.user_attrs.get("heartbeat")
     if heartbeat is None and trial.datetime_start is not None:
