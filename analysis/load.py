@@ -473,7 +473,8 @@ def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:
         paths.setdefault(log.error, []).append(log.path)
     fixes = {"; is its module on PYTHONPATH?": "put the folder holding the class's module on PYTHONPATH "
                                                "(PYTHONPATH=<folder> hersd-report ...)",
-             "; fix that module": "fix that module"}  # hersd.contract.plugins.class_at's two endings
+             "; is the class's name right?": "give its module that class again (the log names it as it was)",
+             "; fix that module": "fix that module"}  # hersd.contract.plugins.class_at's three endings
     lines = []
     for error, shown in paths.items():
         ending = next((end for end in fixes if error.endswith(end)), None)

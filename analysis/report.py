@@ -664,7 +664,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except (DiskFullError, OSError) as err:  # a full disk: one line naming the file and the bytes it needs
         if not full_disk(err):
-            return _unwritable(err)
+            return _unwritable(err, args.out if args.out is not None else args.folder / "report")
         if not isinstance(err, DiskFullError):  # a folder it could not make: one block of its device
             path = Path(err.filename or (args.out if args.out is not None else args.folder / "report"))
             err = DiskFullError(path, block_bytes(path))
@@ -678,12 +678,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _unwritable(err: BaseException) -> int:
-    """An error writing the report but a full disk: one line naming the file, exit 2 (an earlier report's folder
-    read-only, or another user's); any other error is raised."""
-    if not isinstance(err, OSError) or err.filename is None:
+def _unwritable(err: BaseException, out: Path) -> int:
+    """An OSError on a file but a full disk: one line naming the file, exit 2: written in the report folder ``out``
+    (an earlier report's folder read-only, or another user's), or read from a run (its animation unreadable); an
+    error naming no file is raised."""
+    path = Path(err.filename) if isinstance(err, OSError) and err.filename is not None else None
+    if path is None:
         raise err
-    path = Path(err.filename)
+    if not path.resolve().is_relative_to(out.resolve()):
+        print(f"hersd-report: error: cannot read {path}: {err.strerror}; make it readable, or move it out of the "
+              "folder", file=sys.stderr)
+        return 2
     shown = path.with_name(path.name.removesuffix(".tmp")) if path.suffix == ".tmp" else path
     print(f"hersd-report: error: cannot write the report's file {shown}: {err.strerror}; give --out a folder you "
           "can write to", file=sys.stderr)
@@ -697,6 +702,9 @@ def _tensorboard(args: argparse.Namespace) -> int:
     except (ReportInputError, ConfigError) as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
+    except WorkerLostError as err:
+        print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
+        return 1
     except OSError as err:
         print(f"hersd-report: error: cannot write the event files to {args.tensorboard}: {err.strerror} "
               f"({err.filename}); choose another --tensorboard folder", file=sys.stderr)

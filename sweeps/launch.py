@@ -20,7 +20,7 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
-from hersd.contract.errors import ConfigError, stop_as_ctrl_c
+from hersd.contract.errors import ConfigError, sigterm_as_ctrl_c
 from hersd.contract.learner_registry import typed_instead
 from hersd.contract.cores import resolve_threads
 
@@ -254,12 +254,12 @@ def usage() -> str:
     ])
 
 
+@sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, finished runs kept
 def main() -> None:
     """Entry point: Hydra's command line over ``conf/sweep.yaml``; ``--dry-run`` lists the runs; an
     interrupt (Ctrl-C) ends with one line and exit code 130, from the start (the modules load in here); a command
     line that does not compose, with one line and exit code 2 (the traceback with ``HYDRA_FULL_ERROR=1``)."""
     global _hydra_full_error
-    stop_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, no .tmp left
     try:
         import hydra
 

@@ -253,6 +253,23 @@ def test_copies_of_one_run_count_once_the_complete_or_longest_read(tmp_path, cap
     assert "c_backup/: 2 run logs copying runs" in (tmp_path / "report" / "index.html").read_text()
 
 
+def test_a_schedule_class_gone_from_its_module_is_one_warning_saying_to_give_it_back(tmp_path, monkeypatch, capsys):
+    """The log names a class its module no longer has (renamed): the fix is the class, not PYTHONPATH or an --out."""
+    write_run(tmp_path / "her", make_config(), np.zeros(6))
+    record = config_record(make_config())
+    record["schedule"] = {"kind": "renamed_steps_load.Step", "k0": 3}
+    write_run(tmp_path / "step", make_config(seed=1), np.zeros(6), meta={"config": {**record, "seed": 1}})
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "renamed_steps_load.py").write_text("class NewStep:\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line == ("warning: schedule class renamed_steps_load.Step cannot be imported (module 'renamed_steps_load' "
+                    "has no attribute 'Step'): 1 run log reported from its logged rates and labelled from the log "
+                    "(step/run.mcap); give its module that class again (the log names it as it was) for the class's "
+                    "own label and a check of its rates")
+
+
 def test_a_schedule_module_that_fails_to_import_is_one_warning_saying_to_fix_it(tmp_path, monkeypatch, capsys):
     """A SyntaxError in the class's module was a traceback that stopped the report; then its runs were skipped.
     They are reported from their logs, labelled from their records, with one line saying how to get the class's."""

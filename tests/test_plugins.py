@@ -42,7 +42,7 @@ def test_a_class_is_found_by_its_path(user_pkg):
                                   r"raised SystemExit: 3 at .*script\.py:3; fix that module$"),
     ("user_pkg_plugins.steps", r"^schedule class user_pkg_plugins\.steps: user_pkg_plugins\.steps is a module; "
                                r"give <module>\.<Class>$"),
-    ("user_pkg_plugins.steps.Nope", r"has no attribute 'Nope'\); give the path of a class user_pkg_plugins.steps defines$"),
+    ("user_pkg_plugins.steps.Nope", r"has no attribute 'Nope'\); is the class's name right\?$"),
     ("no_such_pkg_plugins.X", r"\(No module named 'no_such_pkg_plugins'\); is its module on PYTHONPATH\?$"),
 ])
 def test_a_class_not_found_is_one_line_saying_why(user_pkg, path, line):

@@ -450,8 +450,8 @@ def test_a_worker_killed_while_drawing_is_one_line_not_a_hang(hand_sized, tmp_pa
     monkeypatch.setattr(report, "_render", killed)
     assert report_main([str(hand_sized), "--out", str(tmp_path / "report")]) == 1
     line = capsys.readouterr().err.strip().splitlines()[-1]
-    assert line == ("hersd-report: error: a worker process stopped before finishing its jobs (exit status 137); "
-                    "run hersd-report again")
+    assert line == ("hersd-report: error: a worker process stopped before finishing its jobs (killed, or out of "
+                    "memory?); run hersd-report again")
     assert not list(tmp_path.rglob("*.tmp"))
 
 
@@ -469,3 +469,22 @@ def test_a_report_folder_it_cannot_write_into_is_one_line_with_exit_2(hand_sized
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert line.startswith(f"hersd-report: error: cannot write the report's file {tmp_path / 'report'}/")
     assert line.endswith(": Read-only file system; give --out a folder you can write to")
+
+
+def test_a_run_file_it_cannot_read_is_one_line_with_exit_2_not_a_hint_about_out(hand_sized, tmp_path, monkeypatch,
+                                                                                 capsys):
+    """A file of a run the report copies (an animation) unreadable is not the report folder's fault."""
+    import errno
+
+    import analysis.report as report
+
+    unreadable = hand_sized / "her0" / "policy" / "epoch_1.gif"
+
+    def refused(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied", str(unreadable))
+
+    monkeypatch.setattr(report, "_copy_animations", refused)
+    assert report_main([str(hand_sized), "--out", str(tmp_path / "report")]) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line == (f"hersd-report: error: cannot read {unreadable}: Permission denied; make it readable, or move it "
+                    "out of the folder")

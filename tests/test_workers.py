@@ -60,4 +60,38 @@ def test_a_worker_that_dies_is_an_error_not_a_hang():
     except subprocess.TimeoutExpired:
         pytest.fail("the parent hung waiting for the job of a worker that died")
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "a worker process stopped before finishing its jobs (exit status 9)"
+    assert done.stdout.strip() == "a worker process stopped before finishing its jobs (killed, or out of memory?)"
+
+
+def test_an_idle_worker_killed_while_another_works_is_no_hang():
+    """A ``multiprocessing.Pool`` whose idle worker (holding the task queue's lock as it waits) was killed hung in
+    its own terminate(); the pool now breaks at once: the other job's result, or WorkerLostError, never a wait."""
+    import subprocess
+    import sys
+
+    program = ("import os, signal, time, tempfile, multiprocessing\n"
+               "from pathlib import Path\n"
+               "from analysis.workers import ForkedMap, WorkerLostError\n"
+               "mark = Path(tempfile.mkdtemp()) / 'idle'\n"
+               "def job(x):\n"
+               "    if x == 1:\n"
+               "        mark.write_text(str(os.getpid()))\n"
+               "        return x\n"
+               "    while not mark.exists():\n"
+               "        time.sleep(0.01)\n"
+               "    time.sleep(0.5)\n"  # the other worker is idle now, waiting for a job
+               "    os.kill(int(mark.read_text()), signal.SIGKILL)\n"
+               "    time.sleep(1.0)\n"
+               "    return x\n"
+               "try:\n"
+               "    print(ForkedMap(job, [0, 1], workers=2).results())\n"
+               "except WorkerLostError as err:\n"
+               "    print(err)\n"
+               "assert multiprocessing.active_children() == []\n")
+    try:
+        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the parent hung after an idle worker was killed")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() in ("[0, 1]", "a worker process stopped before finishing its jobs (killed, or out of "
+                                              "memory?)")

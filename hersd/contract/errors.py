@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import errno
 import os
+import signal
+import threading
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 FULL_DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT)  # no space left on the device; the user's quota used up
@@ -43,16 +46,24 @@ def interrupted(err: BaseException) -> bool:
     return any(isinstance(link, KeyboardInterrupt) for link in _chain(err))
 
 
-def stop_as_ctrl_c() -> None:
-    """From now on in this process, SIGTERM (``kill PID``, a supervisor stopping it) ends it as a Ctrl-C does: a
-    KeyboardInterrupt, so the command's one line, exit 130 and clean-up (no ``.tmp`` left) hold for it too. Only
-    for a command's own process: never for pool workers (a handler there can miss the signal as a worker blocks)."""
-    import signal
+@contextmanager
+def sigterm_as_ctrl_c() -> Iterator[None]:
+    """Within the block (or the function it decorates), SIGTERM (``kill PID``, a supervisor stopping the command)
+    is a Ctrl-C: a KeyboardInterrupt, so the command's one line, exit 130 and clean-up hold for it too. The
+    handler before it is restored on the way out (a command's ``main`` called in another program leaves it as it
+    was). Only in the main thread, where Python runs signal handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
 
     def _interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, _interrupt)
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _chain(err: BaseException | None) -> Iterator[BaseException]:

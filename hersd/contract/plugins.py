@@ -45,7 +45,7 @@ def class_at(path: str, what: str) -> Any:
         raise ConfigError(f"{what} class {path}: {path} is a module; give <module>.<Class>")
     if found is None:
         raise ConfigError(f"{what} class {path} cannot be imported (module {module!r} has no attribute {name!r}); "
-                          f"give the path of a class {module} defines")
+                          "is the class's name right?")
     return found
 
 

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from hersd.contract.errors import ConfigError, DiskFullError, stop_as_ctrl_c
+from hersd.contract.errors import ConfigError, DiskFullError, sigterm_as_ctrl_c
 
 if TYPE_CHECKING:
     from hersd.contract.config import TrainConfig
@@ -251,13 +251,13 @@ def checked_run(argv: list[str], writes: bool = True) -> RunSpec:
     return spec
 
 
+@sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, the finished epochs kept
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``hersd-train``; bad input and a full disk end with one line on stderr and exit code 2,
     a run whose losses turn NaN or infinite, or whose schedule's rate raises, with one line and exit code 1, an interrupt (Ctrl-C) with one line
     and exit code 130: in training, naming the folder that keeps the finished epochs; before it (the config
     composed, torch and MuJoCo loaded), saying so."""
     argv = sys.argv[1:] if argv is None else argv
-    stop_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, the finished epochs kept, no .tmp left
     try:
         if any(arg in HELP_FLAGS for arg in argv):
             try:
