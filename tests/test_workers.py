@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import gc
 import multiprocessing
+import subprocess
+import sys
 import time
 
 import pytest
@@ -19,35 +21,28 @@ def test_forked_jobs_give_the_results_in_order_and_raise_their_errors():
         ForkedMap(lambda x: 1 / (x - 3), items, workers=2).results()
 
 
-def test_an_error_in_the_parent_while_the_workers_run_stops_them_and_unfreezes_the_objects():
+def test_an_error_in_the_parent_while_the_workers_run_ends_them_and_unfreezes_the_objects():
+    """The running jobs finish (a figure is seconds; the workers are never signalled), those not started are
+    cancelled, and no worker is left."""
     with pytest.raises(RuntimeError, match="statistics failed"):
-        with ForkedMap(lambda seconds: time.sleep(seconds), [30.0, 30.0], workers=2):
+        with ForkedMap(lambda seconds: time.sleep(seconds), [1.0] * 8, workers=2):
             assert gc.get_freeze_count() > 0
             raise RuntimeError("statistics failed")  # as when the report's statistics raise while figures draw
     assert gc.get_freeze_count() == 0 and multiprocessing.active_children() == []
 
 
 def test_workers_stopped_after_every_map_never_hang_the_parent():
-    """The parent stops its workers after every map (``close``, SIGTERM): each exits at once, whatever it was doing (a
-    Python-level SIGTERM handler can miss a signal that arrives as it blocks on the pool's queue). Many maps, in a
-    fresh process."""
-    import subprocess
-    import sys
-
+    """The parent ends its workers after every map (``close``): many maps, in a fresh process, none waits."""
     program = ("from analysis.workers import ForkedMap\n"
                "for _ in range(60):\n"
                "    assert ForkedMap(abs, list(range(-3, 3)), workers=2).results() == [3, 2, 1, 0, 1, 2]\n")
-    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
+    _fresh_python(program, timeout=120, hung="the parent hung ending its workers")
 
 
 def test_a_worker_that_dies_is_an_error_not_a_hang():
     """A worker killed as it works (the OOM killer, ``kill -9``, a job's module calling sys.exit or os._exit) lost
     its job: the pool started another worker and waited for that job forever, the report hanging. Now ``results``
     raises WorkerLostError naming the worker's exit, and no worker is left."""
-    import subprocess
-    import sys
-
     program = ("import os, multiprocessing\n"
                "from analysis.workers import ForkedMap, WorkerLostError\n"
                "try:\n"
@@ -55,20 +50,12 @@ def test_a_worker_that_dies_is_an_error_not_a_hang():
                "except WorkerLostError as err:\n"
                "    print(err)\n"
                "assert multiprocessing.active_children() == []\n")
-    try:
-        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
-    except subprocess.TimeoutExpired:
-        pytest.fail("the parent hung waiting for the job of a worker that died")
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "a worker process stopped before finishing its jobs (killed, or out of memory?)"
+    assert _fresh_python(program, timeout=60, hung="the parent hung waiting for the job of a worker that died") == "a worker process stopped before finishing its jobs (killed, or out of memory?)"
 
 
 def test_an_idle_worker_killed_while_another_works_is_no_hang():
     """A ``multiprocessing.Pool`` whose idle worker (holding the task queue's lock as it waits) was killed hung in
     its own terminate(); the pool now breaks at once: the other job's result, or WorkerLostError, never a wait."""
-    import subprocess
-    import sys
-
     program = ("import os, signal, time, tempfile, multiprocessing\n"
                "from pathlib import Path\n"
                "from analysis.workers import ForkedMap, WorkerLostError\n"
@@ -88,10 +75,16 @@ def test_an_idle_worker_killed_while_another_works_is_no_hang():
                "except WorkerLostError as err:\n"
                "    print(err)\n"
                "assert multiprocessing.active_children() == []\n")
-    try:
-        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=60)
-    except subprocess.TimeoutExpired:
-        pytest.fail("the parent hung after an idle worker was killed")
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() in ("[0, 1]", "a worker process stopped before finishing its jobs (killed, or out of "
+    assert _fresh_python(program, timeout=60, hung="the parent hung after an idle worker was killed") in ("[0, 1]", "a worker process stopped before finishing its jobs (killed, or out of "
                                               "memory?)")
+
+
+def _fresh_python(program: str, timeout: float, hung: str) -> str:
+    """``program`` run by a new interpreter -> its stdout, stripped; the test fails with ``hung`` past ``timeout``
+    seconds, or with the program's stderr if it fails."""
+    try:
+        done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pytest.fail(hung)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
