@@ -28,6 +28,7 @@ from omegaconf import DictConfig
 
 from hersd.contract.cores import available_cores
 from hersd.contract.errors import ConfigError
+from hersd.contract.runstore import pid_alive
 from sweeps.hydra_private import cap_local_workers
 from sweeps.plan import SweepError
 
@@ -105,15 +106,7 @@ def process_start(pid: int) -> str:
 
 def alive(pid: int, start: str) -> bool:
     """Whether the process ``pid`` that started at ``start`` (:func:`process_start`) still runs."""
-    if start:
-        return process_start(pid) == start
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass
-    return True
+    return process_start(pid) == start if start else pid_alive(pid)
 
 
 def main_process() -> str:
