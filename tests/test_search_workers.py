@@ -5,13 +5,14 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
-from helpers import killed_while_training
+from helpers import group_alive, killed_while_training
 from optuna.trial import TrialState
 from searches import _count_finished, fails_with, load, only_db, run_meta, tiny_search
 
@@ -140,6 +141,59 @@ def test_ctrl_c_in_training_is_one_line_without_optunas_traceback(tmp_path: Path
     assert _interrupted_search(tmp_path, capfd) == ["hersd-search: interrupted; re-run the same command to resume"]
     (trial,) = [trial for trial in load(only_db(tmp_path)).trials if trial.state != TrialState.WAITING]
     assert trial.state == TrialState.FAIL and trial.user_attrs["interrupted"]  # recorded as interrupted
+
+
+def test_kill_of_a_search_training_in_its_own_process_is_ctrl_cs_one_line(tmp_path: Path, capfd,
+                                                                          monkeypatch) -> None:
+    """``kill PID`` (SIGTERM) of a search with one worker (training in the search's process): as a Ctrl-C."""
+    def killed(spec, command="", on_epoch=None, on_logged=None):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises here
+        raise AssertionError("SIGTERM did not interrupt the training")
+
+    def unhandled(signum, frame):  # without the command's handler (not pytest's death)
+        raise AssertionError("hersd-search let SIGTERM through")
+
+    monkeypatch.setattr(hersd.engine.train, "train", killed)
+    previous = signal.signal(signal.SIGTERM, unhandled)
+    try:
+        assert _interrupted_search(tmp_path, capfd) == ["hersd-search: interrupted; re-run the same command to "
+                                                         "resume"]
+        assert signal.getsignal(signal.SIGTERM) is unhandled  # the command's handler went with it
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    (trial,) = [trial for trial in load(only_db(tmp_path)).trials if trial.state != TrialState.WAITING]
+    assert trial.state == TrialState.FAIL and trial.user_attrs["interrupted"]
+
+
+def test_kill_of_a_search_reaches_its_workers_each_recording_its_trial_and_the_same_command_resumes(
+        tmp_path: Path) -> None:
+    """``kill PID`` (SIGTERM) of a search's main process alone, its two worker processes training: each worker
+    records its trial as interrupted, all end with the search's one line, exit 130, no traceback, nothing left
+    running; the same command then trains the two trials again, resuming their runs."""
+    args = ["search.n_jobs=2", "search.n_trials=2", "search.pruner.kind=none", "task=reach", "epochs=20",
+            "task.cycles_per_epoch=1", "ddpg.batches_per_cycle=1", "ddpg.test_rollouts=1", "ddpg.batch_size=64",
+            "render_every=0", "bias.epochs=[]", f"results_dir={tmp_path}"]
+    proc = subprocess.Popen([sys.executable, "-c", "from sweeps.search.cli import main; main()", *args],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while len(list(tmp_path.rglob("checkpoint.pt"))) < 2 and time.monotonic() < deadline:  # both runs training
+        time.sleep(0.2)
+    os.kill(proc.pid, signal.SIGTERM)  # the main process alone, as a supervisor or ``kill PID`` does
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    lines = [line for line in err.strip().splitlines() if "A new study created" not in line]
+    assert lines == ["hersd-search: interrupted; re-run the same command to resume"], err[-3000:]
+    assert not group_alive(proc.pid, seconds=5) and not list(tmp_path.rglob("*.tmp"))
+    study = load(only_db(tmp_path))
+    assert [(t.state, t.user_attrs.get("interrupted")) for t in study.trials] == [(TrialState.FAIL, True)] * 2
+
+    cli.main(args)  # the same command again
+    study = load(only_db(tmp_path))
+    for trial in study.get_trials(states=(TrialState.COMPLETE,)):
+        log = read_run(Path(trial.user_attrs["run_dirs"][0]) / "run.mcap")
+        assert log.complete and len(log.epochs) == 20 and log.sessions[-1]["resumed_from_epoch"] >= 1
+    assert len(study.get_trials(states=(TrialState.COMPLETE,))) == 2
 
 
 def test_ctrl_c_in_optunas_bookkeeping_is_one_line(tmp_path: Path, capfd, monkeypatch) -> None:

@@ -51,12 +51,15 @@ def sigterm_as_ctrl_c() -> Iterator[None]:
     """Within the block (or the function it decorates), SIGTERM (``kill PID``, a supervisor stopping the command)
     is a Ctrl-C: a KeyboardInterrupt, so the command's one line, exit 130 and clean-up hold for it too. The
     handler before it is restored on the way out (a command's ``main`` called in another program leaves it as it
-    was). Only in the main thread, where Python runs signal handlers."""
+    was). A SIGTERM that follows while the first is handled is ignored: the clean-up it started is not cut short
+    (a supervisor that signals a process group reaches the command and its workers, and a command passes it on to
+    workers too). Only in the main thread, where Python runs signal handlers."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def _interrupt(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, _interrupt)

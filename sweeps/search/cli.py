@@ -19,7 +19,7 @@ from typing import NoReturn
 import optuna
 from optuna.storages import BaseStorage
 
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, sigterm_as_ctrl_c
 from hersd.contract.study import found_by_report, shown, storage_file
 from hersd.engine.resources import check_machine
 from sweeps.search.storage import open_storage
@@ -147,6 +147,7 @@ def summarise(plan: SearchPlan, storage: BaseStorage, first_trial: int) -> str |
     return first_error(study, first_trial)
 
 
+@sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, each trial recorded as interrupted
 def main(argv: list[str] | None = None) -> None:
     """``hersd-search [search=NAME] [search.KEY=VALUE ...] [TRAINING OVERRIDES ...]``."""
     argv = sys.argv[1:] if argv is None else list(argv)

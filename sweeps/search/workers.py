@@ -11,7 +11,9 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import signal
+import os
 import sys
+from contextlib import nullcontext
 from dataclasses import asdict
 from functools import partial
 from multiprocessing import resource_tracker
@@ -21,7 +23,7 @@ from typing import Any
 import optuna
 
 from hersd.contract.compose import CONFIG_MODULE
-from hersd.contract.errors import ConfigError
+from hersd.contract.errors import ConfigError, sigterm_as_ctrl_c
 from sweeps.launchers import check_slurm as check_slurm_answers, end_with, main_process
 from sweeps.search.storage import open_storage
 from sweeps.search.config import SlurmConfig
@@ -30,6 +32,7 @@ from sweeps.search.plan import SearchPlan, run_threads
 from sweeps.search.study import make_pruner, make_sampler, room_for_trial
 
 SLURM_PRESET = ("hydra", "launcher", "slurm.yaml")  # hersd-sweep's SLURM settings, in the hersd.conf package
+STOPS = {signal.SIGINT, signal.SIGTERM}  # Ctrl-C and ``kill PID``: blocked while a local worker starts
 SLURM_FALLBACK = {"partition": None, "timeout_min": 240, "cpus_per_task": 1, "mem_gb": 8}
 
 
@@ -81,8 +84,8 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, search_pro
     """One worker: Optuna's loop on the shared study for at most ``n_trials`` trials, sharing the cores. A local
     worker process (``search_process`` given: the search's main process, :func:`sweeps.launchers.main_process`) ends
     within a second of that process, however it ends (:func:`sweeps.launchers.end_with`: its trial, left RUNNING, is
-    lost and re-run by the next command); it starts with SIGINT blocked (:func:`run_local`) and takes it here, where
-    a Ctrl-C ends it with exit code 130 and no traceback."""
+    lost and re-run by the next command); it starts with SIGINT and SIGTERM blocked (:func:`run_local`) and takes
+    them here, where a Ctrl-C or ``kill`` ends it with exit code 130 and no traceback."""
     local = search_process is not None
     if local:
         end_with(search_process, "hersd-search", "its trial is re-run when the same command runs again")
@@ -92,15 +95,10 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, search_pro
         for log_filter in filters:
             handler.addFilter(log_filter)
     try:
-        if local:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C while it started arrives now
-        study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
-                                  sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
-        run_trial = partial(objective, plan=plan, threads=run_threads(plan.base, concurrent_runs), refusals=refusals)
-        for _ in range(n_trials):  # stop at search.n_trials in the study, counting the trials other workers run
-            if refusals or not room_for_trial(study, plan.search.n_trials, plan.search.stale_after_minutes * 60):
-                break
-            study.optimize(run_trial, n_trials=1, catch=(Exception,))
+        with sigterm_as_ctrl_c() if local else nullcontext():
+            if local:  # a Ctrl-C or kill while it started arrives now
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)
+            _optimize(plan, n_trials, concurrent_runs, refusals)
     except BaseException as err:
         if not interrupted(err):
             raise
@@ -118,6 +116,18 @@ def run_worker(plan: SearchPlan, n_trials: int, concurrent_runs: int, search_pro
         sys.exit(2)
 
 
+def _optimize(plan: SearchPlan, n_trials: int, concurrent_runs: int, refusals: list[str]) -> None:
+    """Optuna's loop on the shared study: at most ``n_trials`` trials, fewer once the study has search.n_trials
+    (counting the trials other workers run) or a run was refused (``refusals``)."""
+    study = optuna.load_study(study_name=plan.study_name, storage=open_storage(plan.storage),
+                              sampler=make_sampler(plan.search.sampler), pruner=make_pruner(plan))
+    run_trial = partial(objective, plan=plan, threads=run_threads(plan.base, concurrent_runs), refusals=refusals)
+    for _ in range(n_trials):
+        if refusals or not room_for_trial(study, plan.search.n_trials, plan.search.stale_after_minutes * 60):
+            break
+        study.optimize(run_trial, n_trials=1, catch=(Exception,))
+
+
 def split_trials(n_trials: int, n_workers: int) -> list[int]:
     """``n_trials`` shared as evenly as possible among at most ``n_workers`` workers -> trials per worker."""
     n_workers = max(1, min(n_workers, n_trials))
@@ -133,24 +143,36 @@ def run_local(plan: SearchPlan, shares: list[int]) -> list[int]:
     workers = [context.Process(target=run_worker, name=f"hersd-search-{i}",
                                args=(plan, share, len(shares), main_process()))
                for i, share in enumerate(shares)]
-    # SIGINT blocked while they start: a worker is never half started, and each inherits the block (across exec)
-    # until run_worker takes the signal, so a Ctrl-C in its start-up is no traceback; a blocked one waits. The
-    # start of multiprocessing's resource tracker unblocks SIGINT: it is started first.
+    # SIGINT and SIGTERM blocked while they start: a worker is never half started, and each inherits the block
+    # (across exec) until run_worker takes the signals, so a Ctrl-C in its start-up is no traceback; a blocked one
+    # waits. The start of multiprocessing's resource tracker unblocks SIGINT: it is started first.
     resource_tracker.ensure_running()
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    signal.pthread_sigmask(signal.SIG_BLOCK, STOPS)
+    previous = signal.signal(signal.SIGTERM, partial(_stop_workers, workers))
     try:
         for worker in workers:
             worker.start()
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a Ctrl-C during the starts arrives here
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)  # a Ctrl-C or kill during the starts arrives here
         for worker in workers:
             worker.join()
-    except KeyboardInterrupt:  # the workers got the same SIGINT: let them record it
+    except KeyboardInterrupt:  # the workers got the same SIGINT (a terminal's Ctrl-C) or SIGTERM: they record it
         for worker in workers:
             worker.join()
         raise
     finally:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOPS)
+        signal.signal(signal.SIGTERM, previous)
     return [worker.exitcode for worker in workers]
+
+
+def _stop_workers(workers: list[multiprocessing.process.BaseProcess], signum: int, frame: object) -> None:
+    """``kill PID`` of the search (SIGTERM, which reaches no worker, unlike a terminal's Ctrl-C): passed on to each
+    running worker, once, then a Ctrl-C here. Each records its trial as interrupted, as for a Ctrl-C."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    for worker in workers:
+        if worker.is_alive():
+            os.kill(worker.pid, signal.SIGTERM)
+    raise KeyboardInterrupt
 
 
 def slurm_settings(slurm: SlurmConfig) -> dict[str, Any]:
