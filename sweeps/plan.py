@@ -1,31 +1,29 @@
 """What a sweep runs, and in which order: its grid (or stages of grids) expanded into runs.
 
-A grid is ``hydra.sweeper.params``, a mapping from override keys to comma lists (Hydra's basic
-sweeper syntax), expanded as the cartesian product with the command line's overrides. It may
-instead be a list of *stages*, run one after another, each a grid or a list of grids:
+A grid is ``hydra.sweeper.params``, a mapping from override keys to comma lists (Hydra's basic sweeper syntax),
+expanded as the cartesian product with the command line's overrides. It may instead be a list of *stages*, run one
+after another, each a grid or a list of grids:
 
     params:
       - [{task: pick_and_place, schedule: "constant,paper_linear_025", seed: "range(0,5)"},
          {task: push, schedule: "constant,paper_linear_025", seed: "range(5,10)"}]
       - {task: pick_and_place, schedule: paper_exp_025, seed: "range(0,5)"}
 
-Runs go **seed by seed**: within a stage every arm's first seed comes before any arm's second
-(a grid's n-th seed is the n-th value its ``seed`` takes; the grids of a stage take turns, in
-their order, within each seed). Launched one per core in that order, a sweep stopped at any
-point leaves every arm with seeds in equal number (one apart at most), not a few arms complete
-and the rest missing. A run named twice is planned once, where it first appears.
+Runs go **seed by seed**: within a stage every arm's first seed comes before any arm's second (a grid's n-th seed is
+the n-th value its ``seed`` takes; the grids of a stage take turns, in their order, within each seed). Launched one
+per core in that order, a sweep stopped at any point leaves every arm with seeds in equal number (one apart at
+most), not a few arms complete and the rest missing. A run named twice is planned once, where it first appears.
 
-``seeds=N`` sweeps ``seed`` over 0..N-1 in every grid that sets no ``seed`` of its own, unless
-the command line sets ``seed``: ``hersd-sweep task=reach seeds=3`` is three runs; ``seeds=`` and ``seed=``
-on one command line are refused (one line, exit 2), not one silently dropped.
+``seeds=N`` sweeps ``seed`` over 0..N-1 in every grid that sets no ``seed`` of its own, unless the command line sets
+``seed``: ``hersd-sweep task=reach seeds=3`` is three runs; ``seeds=`` and ``seed=`` on one command line are refused
+(one line, exit 2), not one silently dropped.
 
 A sweep that trains here skips, one line each, the runs this machine cannot train (``precision=bf16`` on a CPU
 without bf16 instructions) and trains the rest; one that can train none of them is refused (:func:`trainable_here`).
 
-Every run is composed and checked before any starts. Hydra composes a config per distinct set
-of group choices (``task=push``, ``schedule=linear``); a run's other overrides (``seed=0``,
-``schedule.beta1=0.25``) are applied to a copy of it as Hydra applies them (:class:`JobConfigs`):
-the 300 runs of ``+grid=beta`` need 3 compositions, not 300.
+Every run is composed and checked before any starts. Hydra composes a config per distinct set of group choices
+(``task=push``, ``schedule=linear``); a run's other overrides (``seed=0``, ``schedule.beta1=0.25``) are applied to a
+copy of it as Hydra applies them (:class:`JobConfigs`): the 300 runs of ``+grid=beta`` need 3 compositions, not 300.
 """
 
 from __future__ import annotations
@@ -34,6 +32,7 @@ import copy
 import json
 import pickle
 import time
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -125,9 +124,8 @@ def launched(run: PlannedRun, threads: int | None) -> tuple[tuple[str, ...], Run
 
 def save_specs(sweep_dir: Path, specs: dict[tuple[str, ...], RunSpec], runs: int) -> None:
     """The resolved runs of a sweep's jobs (job overrides -> spec), for the jobs to take (:func:`job_spec`), and its
-    plan (the number of ``runs`` launched, the start time), each written whole
-    (:func:`hersd.contract.runlog.replace_file`). A full disk is a SweepError (exit 2: the file and the bytes it
-    needs, in one line; no half-written or temporary file left)."""
+    plan (``runs`` launched, the start time), each written whole (:func:`hersd.contract.runlog.replace_file`). A full
+    disk is a SweepError (exit 2, one line: the file, the bytes it needs); no file left, nor the folder if empty."""
     from hersd.contract.runlog import replace_file
 
     files = {SPECS_NAME: pickle.dumps(specs), PLAN_NAME: json.dumps({"runs": runs, "start": time.time()}).encode()}
@@ -137,6 +135,8 @@ def save_specs(sweep_dir: Path, specs: dict[tuple[str, ...], RunSpec], runs: int
     except DiskFullError as err:
         for name in files:
             (sweep_dir / name).unlink(missing_ok=True)
+        with suppress(OSError):  # not empty: another sweep's files (a sweep.dir given twice)
+            sweep_dir.rmdir()
         raise SweepError(f"{err}; nothing ran yet", exit_code=2) from None
 
 

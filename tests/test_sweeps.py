@@ -519,7 +519,7 @@ main()
 
 def test_a_full_disk_before_the_first_run_is_one_line_with_exit_2_and_leaves_no_file(tmp_path):
     """The disk fills as the sweep writes its plan (specs.pkl, before any run): one line naming the file and the
-    bytes it needs, exit 2, and no half-written or temporary file left in the sweep's folder."""
+    bytes it needs, exit 2, and no half-written or temporary file left, nor the sweep's folder."""
     args = ["+grid=smoke", "schedule=constant", "seeds=1", "epochs=1", *TINY, "hydra/launcher=basic",
             f"results_dir={tmp_path}"]
     full = subprocess.run([sys.executable, "-c", FULL_DISK_AT_START, *args], capture_output=True, text=True,
@@ -528,7 +528,7 @@ def test_a_full_disk_before_the_first_run_is_one_line_with_exit_2_and_leaves_no_
     assert full.returncode == 2 and len(err.splitlines()) == 1, full.stdout[-2000:] + full.stderr[-3000:]
     assert err.startswith("hersd-sweep: error: no space left on the device of ") and "specs.pkl" in err
     assert not [path for path in tmp_path.rglob("*") if path.is_file()]  # no specs.pkl, no .tmp
-    assert not list(tmp_path.rglob("run.mcap"))
+    assert not list((tmp_path / ".sweeps").iterdir())  # nor the sweep's empty folder
 
 
 def test_sigterm_to_the_sweep_ends_it_as_ctrl_c_does_with_one_line_and_no_temporary_file(tmp_path):
