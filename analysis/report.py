@@ -60,7 +60,7 @@ from analysis.studies import StudyStorage, open_study_storage
 from hersd.contract.study import StudyStorageError, find_study_storages
 from analysis.tables import RUN_COLUMNS, html_table, markdown_table
 from analysis.tensorboard_export import export_events
-from hersd.contract.errors import ConfigError, DiskFullError, block_bytes, full_disk
+from hersd.contract.errors import ConfigError, DiskFullError, block_bytes, full_disk, sigterm_as_ctrl_c
 from hersd.contract.runlog import replace_file, temporary_file
 from analysis.workers import ForkedMap, WorkerLostError
 from hersd.contract.tasks import task_rank, task_title
@@ -633,6 +633,7 @@ class _OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+@sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130
 def main(argv: Sequence[str] | None = None) -> int:
     parser = _OneLineParser(prog="hersd-report",
                             description="Tables, figures and an HTML report from hersd run logs and Optuna studies.")
@@ -662,6 +663,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WorkerLostError as err:
         print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)", file=sys.stderr)
+        return 130
     except (DiskFullError, OSError) as err:  # a full disk: one line naming the file and the bytes it needs
         if not full_disk(err):
             return _unwritable(err, args.out if args.out is not None else args.folder / "report")
@@ -705,6 +709,9 @@ def _tensorboard(args: argparse.Namespace) -> int:
     except WorkerLostError as err:
         print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)", file=sys.stderr)
+        return 130
     except OSError as err:
         print(f"hersd-report: error: cannot write the event files to {args.tensorboard}: {err.strerror} "
               f"({err.filename}); choose another --tensorboard folder", file=sys.stderr)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -452,6 +453,39 @@ def test_a_worker_killed_while_drawing_is_one_line_not_a_hang(hand_sized, tmp_pa
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert line == ("hersd-report: error: a worker process stopped before finishing its jobs (killed, or out of "
                     "memory?); run hersd-report again")
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"], ids=["ctrl_c", "kill"])
+def test_ctrl_c_or_kill_of_the_report_is_one_line_with_exit_130(stop, hand_sized, tmp_path, monkeypatch, capsys):
+    """Ctrl-C, or ``kill PID`` (SIGTERM), while the report draws: a traceback (or, for SIGTERM, a silent death
+    that left its workers blocked forever); now one line, exit 130, no temporary file."""
+    import os
+    import signal
+
+    import analysis.report as report
+
+    def interrupted(job):
+        report.temporary_file(job[1]).write_bytes(b"half")
+        os.kill(os.getpid(), getattr(signal, stop))
+        time.sleep(5)  # the handler raises here
+        raise AssertionError(f"{stop} did not interrupt the report")
+
+    def unhandled(signum, frame):  # without the command's handler (not pytest's death)
+        raise AssertionError("hersd-report let SIGTERM through")
+
+    monkeypatch.setattr("analysis.workers.available_cores", lambda: 1)  # figures drawn in this process
+    monkeypatch.setattr(report, "_render", interrupted)
+    previous = signal.signal(signal.SIGTERM, unhandled)
+    try:
+        code = report_main([str(hand_sized), "--out", str(tmp_path / "report")])
+    except KeyboardInterrupt:
+        pytest.fail("a traceback: the interrupt left hersd-report")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert code == 130
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)"]
     assert not list(tmp_path.rglob("*.tmp"))
 
 

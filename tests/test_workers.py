@@ -88,3 +88,68 @@ def _fresh_python(program: str, timeout: float, hung: str) -> str:
         pytest.fail(hung)
     assert done.returncode == 0, done.stderr
     return done.stdout.strip()
+
+
+# Two jobs that each mark their start (a file named by the worker's pid in the folder given as argv[1]), the first
+# then sleeping argv[2] seconds, the second none (its worker then idles); the parent prints "interrupted" on a Ctrl-C
+# and exits 130.
+SLEEPING_JOBS = """
+import os, sys, time
+from pathlib import Path
+from analysis.workers import ForkedMap
+
+def job(seconds):
+    (Path(sys.argv[1]) / str(os.getpid())).touch()
+    time.sleep(seconds)
+    return seconds
+
+try:
+    ForkedMap(job, [float(sys.argv[2]), 0.0], workers=2).results()
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+def _started(folder, seconds: float) -> tuple[subprocess.Popen, list[int]]:
+    """SLEEPING_JOBS started in a session of its own, its first job sleeping ``seconds`` -> (it, its workers' pids)
+    once both jobs started and the second's worker idles."""
+    import signal
+
+    proc = subprocess.Popen([sys.executable, "-c", SLEEPING_JOBS, str(folder), str(seconds)], stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 60
+    while len(list(folder.iterdir())) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    return proc, [int(path.name) for path in folder.iterdir()]
+
+
+def test_the_workers_end_within_a_second_of_a_killed_parent(tmp_path):
+    """``kill -9`` of the process that forked the workers (the report's): they were left forever, blocked on the
+    pool's pipes; each now ends within a second or so."""
+    import os
+    import signal
+
+    from helpers import group_alive
+
+    proc, workers = _started(tmp_path, seconds=600)
+    assert len(workers) == 2
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not group_alive(proc.pid, seconds=5), "the workers outlived their parent"
+
+
+def test_a_ctrl_c_lets_the_running_jobs_finish_without_a_traceback(tmp_path):
+    """A Ctrl-C (SIGINT to the terminal's process group) reaches the workers too: an idle one printed a
+    KeyboardInterrupt traceback (and one stopped while sending its result back would leave the pool reading it
+    forever); they now ignore it, the parent alone is interrupted, and it ends once the running job is done."""
+    import os
+    import signal
+
+    proc, workers = _started(tmp_path, seconds=2)
+    assert len(workers) == 2
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.strip() == "interrupted", err
