@@ -51,6 +51,22 @@ def test_a_search_whose_trials_all_fail_exits_non_zero_naming_the_first_error(tm
         "hersd-search: error: every trial of this search failed; the first, trial 0: RuntimeError: boom at epoch 2")
 
 
+def test_the_sets_the_search_enqueues_count_among_its_trials(tmp_path, newcomer, capsys) -> None:
+    """The default search enqueues the paper's two sets before its trials were counted, so those were not the
+    command's: two failed trials exited 0 without the error line, and two complete trials then a failed one
+    ended "every trial of this search failed", exit 1."""
+    crash = ["search.pruner.kind=none", "threads=1", f"learner._target_={CRASH_MODULE}.Crash"]
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["search.n_trials=2", *crash, *tiny_search(tmp_path / "all", epochs=2)])
+    assert exit_info.value.code == 1 and capsys.readouterr().err.splitlines()[-1] == (
+        "hersd-search: error: every trial of this search failed; the first, trial 0: RuntimeError: boom at epoch 2")
+    cli.main(["search.n_trials=3", *crash[:-1], f"learner._target_={CRASH_MODULE}.CrashThird",
+              *tiny_search(tmp_path / "third", epochs=2)])  # no SystemExit: done
+    trials = load(only_db(tmp_path / "third")).trials
+    assert [trial.state for trial in trials] == [TrialState.COMPLETE] * 2 + [TrialState.FAIL]
+    assert "every trial" not in capsys.readouterr().err
+
+
 def docs_command(marker: str) -> list[str]:
     """The arguments of the one ``hersd-search`` command in docs/SEARCH.md that holds ``marker``."""
     (line,) = [line for line in DOCS.read_text().splitlines() if line.startswith("hersd-search ") and marker in line]

@@ -67,7 +67,7 @@ class LateRaise(Schedule):
 
 CRASH_MODULE = "newcomer_crash"
 # A learner whose update raises once a run is under way (its epoch 2 at 2 cycles x 5 updates, searches.TINY's),
-# after every check: learner._target_=newcomer_crash.Crash.
+# after every check: learner._target_=newcomer_crash.Crash; CrashThird: only in the third run of its process.
 CRASH = '''
 from hersd.engine.learners.ddpg import DDPG
 
@@ -78,6 +78,16 @@ class Crash(DDPG):
         if self.calls > 10:
             raise RuntimeError("boom at epoch 2")
         return super().update(batch)
+
+
+RUNS = [0]
+
+
+class CrashThird(Crash):  # only the third run made in this process crashes
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        RUNS[0] += 1
+        self.calls = 0 if RUNS[0] == 3 else float("-inf")
 '''
 
 

@@ -18,6 +18,7 @@ from typing import NoReturn
 
 import optuna
 from optuna.storages import BaseStorage
+from optuna.trial import TrialState
 
 from hersd.contract.errors import ConfigError, sigterm_as_ctrl_c
 from hersd.contract.study import found_by_report, shown, storage_file
@@ -132,9 +133,9 @@ def report_command(results_dir: str, spec: str) -> str:
     return shlex.join(command)
 
 
-def summarise(plan: SearchPlan, storage: BaseStorage, first_trial: int) -> str | None:
+def summarise(plan: SearchPlan, storage: BaseStorage, earlier: set[int]) -> str | None:
     """Print the trial counts, the best trial, and the commands that show the study -> the first error if every
-    trial from number ``first_trial`` on (this command's) failed."""
+    trial but the ``earlier`` ones (this command's: those it ran, the sets it enqueued among them) failed."""
     study = optuna.load_study(study_name=plan.study_name, storage=storage)
     counts = trial_counts(study)
     print(f"trials: {', '.join(f'{n} {state}' for state, n in counts.items() if n or state != 'skipped')}")
@@ -144,7 +145,7 @@ def summarise(plan: SearchPlan, storage: BaseStorage, first_trial: int) -> str |
     print(f"figures and tables: {report_command(plan.base.results_dir, plan.storage)}")
     target = shown(plan.storage) if "://" in plan.storage else str(storage_file(plan.storage))  # URL or journal
     print(f"dashboard: pip install optuna-dashboard; optuna-dashboard {shlex.quote(target)}")
-    return first_error(study, first_trial)
+    return first_error(study, earlier)
 
 
 @sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, each trial recorded as interrupted
@@ -157,7 +158,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         plan, storage, study = start(argv)
         print(f"study {plan.study_name} in {shown(plan.storage)}", flush=True)
-        first_trial = len(study.get_trials(deepcopy=False))
+        earlier = {trial.number for trial in study.get_trials(deepcopy=False) if trial.state != TrialState.WAITING}
         worker_codes = launch(plan, storage, study)
     except ConfigError as err:
         _fail(str(err))
@@ -166,7 +167,7 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(130)
     if worker_codes is None:  # SLURM jobs submitted
         return
-    error = summarise(plan, storage, first_trial)
+    error = summarise(plan, storage, earlier)
     failed = [code for code in worker_codes if code != 0]
     if 2 in failed:
         _fail("a worker stopped because a run was refused (the line above); fix the input and re-run")

@@ -160,9 +160,10 @@ def trial_counts(study: optuna.Study) -> dict[str, int]:
     return {**counts, "skipped": sum(SKIPPED_ATTR in trial.user_attrs for trial in trials)}
 
 
-def first_error(study: optuna.Study, first_trial: int) -> str | None:
-    """If no trial from number ``first_trial`` on finished and some failed: the first failure (``trial n: error``)."""
-    trials = [trial for trial in study.get_trials(deepcopy=False) if trial.number >= first_trial]
+def first_error(study: optuna.Study, earlier: set[int]) -> str | None:
+    """If no trial but the ``earlier`` ones (those a command found begun) finished and some failed: the first
+    failure (``trial n: error``)."""
+    trials = [trial for trial in study.get_trials(deepcopy=False) if trial.number not in earlier]
     failed = [trial for trial in trials if trial.state == TrialState.FAIL]
     if not failed or any(trial.state in FINISHED_STATES for trial in trials):
         return None
