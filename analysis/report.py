@@ -548,7 +548,7 @@ def build_report(folder: str | Path, out: str | Path | None = None, tasks: Seque
         raise ReportInputError(f"unknown figure format {fmt!r}; choose one of: {', '.join(FORMATS)}")
     if window < 1:
         raise ReportInputError(f"--smooth must be at least 1 epoch, got {window}")
-    folder = Path(folder)
+    folder = checked_folder(folder)
     out = _checked_out(Path(out) if out is not None else folder / "report")
     given = _open_given_storages(storages)
     timings: dict[str, float] = {}
@@ -702,7 +702,7 @@ def _unwritable(err: BaseException, out: Path) -> int:
 def _tensorboard(args: argparse.Namespace) -> int:
     """``--tensorboard DIR``: the runs' event files (analysis.tensorboard_export), no report."""
     try:
-        written = export_events(args.folder, args.tensorboard, tasks=args.task, algos=args.algo)
+        written, table = export_events(args.folder, args.tensorboard, tasks=args.task, algos=args.algo)
     except (ReportInputError, ConfigError) as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2

@@ -2,6 +2,7 @@
 TensorBoard's own EventAccumulator, every /epoch field of a run at its step, live, after a kill and resume, and
 converted from committed logs; the setting without the package, one line and exit 2."""
 
+import json
 import shutil
 import subprocess
 import sys
@@ -20,6 +21,7 @@ from tensorboard.util import tensor_util
 
 from analysis.load import find_logs
 from analysis.report import main as report_main
+from analysis.tensorboard_export import MANIFEST
 from hersd.contract.compose import compose_train as compose
 from hersd.contract.runlog import read_records
 from hersd.contract.runstore import config_hash
@@ -110,11 +112,12 @@ def test_a_killed_run_leaves_readable_files_and_its_resume_continues_them(tmp_pa
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory) -> Path:
     """Every log under results/ converted by hersd-report --tensorboard (twice: the second replaces the first),
-    a stale run's event file left there before."""
+    a run folder an earlier conversion wrote, of a run gone since, left there before."""
     out = tmp_path_factory.mktemp("tensorboard")
     stale = out / "FetchPush" / "gone" / "seed0"
     stale.mkdir(parents=True)
     (stale / "events.out.tfevents.1.host").write_bytes(b"")
+    (out / MANIFEST).write_text(json.dumps({"FetchPush/gone/seed0": {"task": "push", "algo": "her"}}))
     assert report_main([str(RESULTS), "--tensorboard", str(out)]) == 0
     assert report_main([str(RESULTS), "--tensorboard", str(out)]) == 0
     return out
@@ -137,6 +140,56 @@ def test_tensorboard_lists_one_run_per_log_named_by_the_report_labels(converted)
     assert {"FetchPush/HER/seed0", "FetchPush/HER eps=0.874375/seed9", "FetchPickAndPlace/exp b1=0.25 b2=0.25/seed4",
             "FetchSlide/linear b1=0.25/seed4"} <= runs
     assert not (converted / "FetchPush" / "gone").exists()
+
+
+def _copied_logs(folder: Path, *runs: str) -> Path:
+    """The committed logs of ``runs`` (paths below results/) copied into ``folder`` -> ``folder``."""
+    for run in runs:
+        (folder / run).mkdir(parents=True)
+        shutil.copy(RESULTS / run / "run.mcap", folder / run / "run.mcap")
+    return folder
+
+
+PUSH_RUN, SLIDE_RUN = "push/her/linear-b1_0.25/seed0-252651aa", "slide/her/constant-0.8/seed0-c2549eae"
+
+
+def test_a_conversion_removes_only_run_folders_it_wrote_of_the_tasks_it_converts(tmp_path):
+    """Every event file below DIR that one conversion did not write was deleted: another tool's runs, the other
+    tasks' runs on a filtered conversion. Now only a run folder an earlier conversion wrote goes, once its run is
+    gone from a conversion of its task."""
+    logs, out = _copied_logs(tmp_path / "logs", PUSH_RUN, SLIDE_RUN), tmp_path / "tb"
+    other_tool = out / "sb3" / "PPO_1" / "events.out.tfevents.1.host"
+    other_tool.parent.mkdir(parents=True)
+    other_tool.write_bytes(b"another tool's run")
+    push, slide = out / "FetchPush" / "linear b1=0.25" / "seed0", out / "FetchSlide" / "HER" / "seed0"
+    assert report_main([str(logs), "--tensorboard", str(out)]) == 0
+    assert report_main([str(logs), "--tensorboard", str(out), "--task", "slide"]) == 0
+    assert list(push.glob(EVENT_FILES)) and list(slide.glob(EVENT_FILES)) and other_tool.exists()
+    shutil.rmtree(logs / "slide")
+    assert report_main([str(logs), "--tensorboard", str(out), "--task", "push"]) == 0  # slide not converted
+    assert list(slide.glob(EVENT_FILES))
+    assert report_main([str(logs), "--tensorboard", str(out)]) == 0  # slide converted: its run is gone
+    assert not (out / "FetchSlide").exists() and list(push.glob(EVENT_FILES)) and other_tool.exists()
+
+
+def test_converting_a_folder_into_itself_keeps_its_runs_live_event_files(tmp_path):
+    logs = _copied_logs(tmp_path / "logs", PUSH_RUN)
+    live = logs / PUSH_RUN / EVENTS_DIR / "events.out.tfevents.1.host"
+    live.parent.mkdir()
+    live.write_bytes(b"written as it trained")
+    assert report_main([str(logs), "--tensorboard", str(logs)]) == 0
+    assert live.read_bytes() == b"written as it trained"
+    assert list((logs / "FetchPush" / "linear b1=0.25" / "seed0").glob(EVENT_FILES))
+
+
+def test_a_conversion_names_the_logs_it_leaves_out(tmp_path, capsys):
+    """It said only how many runs it wrote; the report names every log left out, damaged or failed: so does it."""
+    logs = _copied_logs(tmp_path / "logs", PUSH_RUN)
+    (logs / "push" / "broken").mkdir()
+    (logs / "push" / "broken" / "run.mcap").write_bytes(b"not a log")
+    assert report_main([str(logs), "--tensorboard", str(tmp_path / "tb")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: skipped unreadable log push/broken/run.mcap" in err, err
 
 
 def test_without_tensorboard_the_setting_and_the_conversion_are_one_line_with_exit_2(tmp_path, capsys, monkeypatch):
