@@ -519,3 +519,16 @@ def test_a_full_disk_is_one_line_with_exit_2_keeps_the_last_epoch_checkpointed_a
     log = read_run(directory)
     assert log.complete and [s["resumed_from_epoch"] for s in log.sessions] == [0, 2]
     pd.testing.assert_frame_equal(metrics(directory / "run.mcap"), metrics(reference))
+
+
+def test_a_spec_edited_after_it_was_resolved_is_refused_before_any_work(tmp_path):
+    """``spec.config.seed = 7`` after ``resolve`` trained seed 7 into seed 0's folder, its log naming seed 0's
+    hash: the spec's identity, hash and folder are checked against its config first."""
+    from hersd.contract.errors import ConfigError
+    from hersd.contract.runspec import resolve
+
+    spec = resolve(compose([*TINY, "epochs=1", f"results_dir={tmp_path}"]))
+    spec.config.seed = 7
+    with pytest.raises(ConfigError, match=r"changed after it was resolved \(seed\)"):
+        train(spec)
+    assert not list(tmp_path.iterdir())  # nothing written

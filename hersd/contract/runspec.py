@@ -14,6 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from hersd.contract.config import TrainConfig
+from hersd.contract.errors import ConfigError
 from hersd.contract.runstore import folder_path, identity_hash, run_identity
 from hersd.contract.schedules.base import Schedule, check_rates
 
@@ -51,6 +52,16 @@ class RunSpec:
         if self.rates is None or len(self.rates) < epochs or closed_form:
             return schedule.exact_mean_rate(epochs)
         return float(np.mean(np.array(self.rates, dtype=float)))
+
+    def check_unchanged(self) -> None:
+        """ConfigError (one line) if its config was edited after :func:`resolve` (``spec.config.seed = 7``): the
+        identity, hash, folder and rates resolved then would no longer be the run's."""
+        identity = run_identity(self.config)
+        if identity != self.identity or folder_path(self.config, identity_hash(identity)) != self.folder:
+            changed = sorted(key for key in {**identity, **self.identity}
+                             if identity.get(key) != self.identity.get(key)) or ["results_dir"]
+            raise ConfigError(f"the run's settings were changed after it was resolved ({', '.join(changed)}); a spec "
+                              "is made once: resolve(config) the changed config instead")
 
     def with_threads(self, threads: int) -> RunSpec:
         """The same run on ``threads`` intra-op threads (a sweep's share of the cores): threads are logged, not part

@@ -238,6 +238,7 @@ def train(run: RunSpec | TrainConfig, command: str = "", on_epoch: EpochCallback
     raises stops the run there, leaving it resumable.
     """
     spec = run if isinstance(run, RunSpec) else resolve(run)
+    spec.check_unchanged()
     directory = spec.folder
     created = not directory.exists()
     directory.mkdir(parents=True, exist_ok=True)
