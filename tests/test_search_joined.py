@@ -43,6 +43,19 @@ def test_a_set_given_on_an_existing_study_is_enqueued_once(tmp_path: Path, capsy
                                                                                  "search.enqueue set")
 
 
+def test_a_set_the_study_has_no_room_for_is_not_enqueued_in_one_line(tmp_path: Path, capsys) -> None:
+    """A set given to a study whose search.n_trials were finished waited in silence, and a later command with a
+    higher n_trials then tried it instead of its own set."""
+    _search(tmp_path, 1, "search.enqueue=[]")
+    capsys.readouterr()
+    _search(tmp_path, 1, "search.enqueue=[{beta1: 0.9, beta2: 0.1}]")
+    assert ("search.enqueue[0] {'beta1': 0.9, 'beta2': 0.1}: not enqueued, search.n_trials=1 leaves no room for "
+            "it; raise search.n_trials to try it\n") in capsys.readouterr().out
+    _search(tmp_path, 2, "search.enqueue=[{beta1: 0.7, beta2: 0.3}]")
+    study = load(only_db(tmp_path))
+    assert len(study.trials) == 2 and study.trials[1].params == SET
+
+
 def test_two_commands_on_one_journal_stop_at_n_trials_and_agree(tmp_path: Path) -> None:
     """Two commands asked for 6 trials ran 7 and summarised "7 complete" and "6 complete". Both enqueue
     default.yaml's two paper points, each tried once."""

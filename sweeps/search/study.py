@@ -97,8 +97,11 @@ def open_study(plan: SearchPlan, storage: BaseStorage) -> optuna.Study:
 def enqueue_sets(study: optuna.Study, plan: SearchPlan) -> None:
     """Enqueue each ``search.enqueue`` set the study holds no trial of (a line names those it holds): a set is
     tried once per study, however many commands name it; two commands enqueuing one set at the same moment are
-    settled when a worker takes the later copy (:func:`enqueued_before`)."""
+    settled when a worker takes the later copy (:func:`enqueued_before`). A set the study has no room left for
+    (search.n_trials finished or taken by the sets waiting before it) is not enqueued, in one line: it would
+    wait, and a later command's trials would try it instead of their own."""
     trials = study.get_trials(deepcopy=False)
+    room = plan.search.n_trials - count_finished(study) - sum(trial.state == TrialState.WAITING for trial in trials)
     for index, params in enumerate(plan.search.enqueue):
         stored = enqueued_params(params, list(plan.search.space.kinds))
         key = json.dumps(stored, sort_keys=True)
@@ -108,8 +111,12 @@ def enqueue_sets(study: optuna.Study, plan: SearchPlan) -> None:
         if held:
             print(f"search.enqueue[{index}] {stored}: the study holds it already (trial {held[0]}); not enqueued "
                   "again", flush=True)
+        elif room <= 0:
+            print(f"search.enqueue[{index}] {stored}: not enqueued, search.n_trials={plan.search.n_trials} leaves "
+                  "no room for it; raise search.n_trials to try it", flush=True)
         else:
             study.enqueue_trial(stored, user_attrs={ENQUEUED_ATTR: key})
+            room -= 1
 
 
 def enqueued_before(trial: optuna.Trial) -> int | None:
