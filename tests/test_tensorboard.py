@@ -89,6 +89,16 @@ def test_a_short_run_writes_every_epoch_field_at_its_step(tmp_path):
     assert settings["bias.epochs"] == "[2]" and "results_dir" not in settings
 
 
+def test_tensorboard_true_on_a_complete_run_writes_its_event_files_from_the_log(tmp_path, capsys):
+    """It said "nothing to do" and wrote none."""
+    log = train(compose([*SHORT, "epochs=2", "tensorboard=false", "quiet=false", f"results_dir={tmp_path}"]))
+    assert not (log.parent / EVENTS_DIR).exists()
+    train(compose([*SHORT, "epochs=2", "quiet=false", f"results_dir={tmp_path}"]))
+    assert f"already complete (2 epochs), its TensorBoard event files written to {log.parent / EVENTS_DIR}" in \
+        capsys.readouterr().out
+    assert_holds_the_log(log.parent / EVENTS_DIR, read_records(log).records)
+
+
 def test_tensorboard_is_no_part_of_the_run_identity():
     assert config_hash(compose([*TINY, "tensorboard=true"])) == config_hash(compose(TINY))
 

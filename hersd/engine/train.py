@@ -36,7 +36,7 @@ from hersd.engine.run_state import RunState, load_checkpoint, save_checkpoint
 from hersd.contract.runlog import LOG_NAME, RunLog, RunLogError, RunLogWriter, read_records, read_run
 from hersd.contract.runspec import RunSpec, resolve
 from hersd.contract.runstore import RunFolder, keep_aside, remove_if_unused
-from hersd.contract.tensorboard_events import EVENTS_DIR, RunEvents
+from hersd.contract.tensorboard_events import EVENTS_DIR, RunEvents, write_run_events
 
 EpochCallback = Callable[[dict], None]
 LoggedCallback = Callable[[list], None]  # the records a log already holds, once before training
@@ -259,7 +259,11 @@ def _train_in(spec: RunSpec, command: str, on_epoch: EpochCallback | None, on_lo
         if previous is not None and previous.complete:
             if not cfg.keep_checkpoint:  # left by a run killed between its completion marker and the removal
                 checkpoint_path.unlink(missing_ok=True)
-            _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), nothing to do")
+            done = "nothing to do"
+            if cfg.tensorboard:  # its event files asked for: written from its log, as a live run's would be
+                write_run_events(log_path, spec.folder / EVENTS_DIR)
+                done = f"its TensorBoard event files written to {spec.folder / EVENTS_DIR}"
+            _say(cfg, f"{log_path}: already complete ({len(previous.epochs)} epochs), {done}")
             if on_logged is not None:
                 on_logged(previous.epochs.to_dict("records"))
             return log_path
