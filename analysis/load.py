@@ -20,8 +20,9 @@ What a run's log recorded is the truth about it: its relabel rates (the ``/epoch
 its ``mu_eps`` and Fig. 1's lines (:func:`analysis.metrics.schedule_curves`); its schedule record gives the kind and
 settings. The schedule's class is imported only for its label, tag and title, and to check it: where today's class
 gives other rates than a log (an edited ``rate``), one warning line per configuration names it
-(:func:`rate_mismatch_lines`). A log whose class cannot be imported here is read all the same, labelled from its
-record as a class without a label of its own would be (:class:`LoggedSchedule`).
+(:func:`rate_mismatch_lines`). A log whose class cannot be imported here, refuses or does not take the logged
+settings (:func:`unfit_settings`), or cannot name them (:func:`naming_error`) is read all the same, labelled from its
+record as a class without a label of its own would be (:class:`LoggedSchedule`), one warning line per class and error.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from hersd.contract.runlog import EPOCH_FIELDS, LOG_NAME, OPTIONAL_EPOCH_FIELDS,
 from hersd.contract.runstore import HASHED_UNLESS, RunFolder, run_identity
 from hersd.contract.schedules import Constant, Schedule, kind_name, schedule_from_record, schedule_rank
 from hersd.contract.schedules.base import shown_value
+from hersd.contract.schedules.registry import raised
 
 RUN_COLUMNS = (
     "run",            # 0-based index of the run in this table
@@ -117,15 +119,15 @@ class RunTable:
     epochs: pd.DataFrame
     skipped: list[str] = field(default_factory=list)
     sessions: pd.DataFrame = field(default_factory=pd.DataFrame)
-    missing_schedules: list[str] = field(default_factory=list)  # one line per schedule class not importable here
+    missing_schedules: list[str] = field(default_factory=list)  # one line per class and error of logged_schedule
     copies: list[str] = field(default_factory=list)  # lines naming the second logs of runs read, left out
     left_out: int = 0  # logs found and not read: unreadable or copies
     rate_mismatches: list[str] = field(default_factory=list)  # one line per configuration whose class's rates differ
 
     def warnings(self) -> list[str]:
         """One line per log left out (unreadable, a copy), per damaged log read up to its damage, per failed run,
-        per schedule class not importable here (its runs read from their logs) and per configuration whose class
-        gives other rates than its logs."""
+        per schedule class that cannot label its logs (its runs read from them: :func:`logged_schedule`) and per
+        configuration whose class gives other rates than its logs."""
         runs = self.runs if len(self.runs) else pd.DataFrame(columns=["damaged", "error", "path", "epochs_done"])
         damaged = [f"damaged log {run.path}: read its {run.epochs_done} epochs before the damage"
                    for run in runs[runs["damaged"].astype(bool)].itertuples()]
@@ -135,8 +137,8 @@ class RunTable:
 
 
 class MissingSchedule(NamedTuple):
-    """A log whose schedule class cannot be imported here (a user's module not on PYTHONPATH): its path
-    (relative to the loaded folder) and the error naming the class."""
+    """A log whose schedule class cannot label it (:func:`logged_schedule`: a user's module not on PYTHONPATH, say):
+    its path (relative to the loaded folder) and the error naming the class."""
 
     path: str
     error: str
@@ -144,9 +146,9 @@ class MissingSchedule(NamedTuple):
 
 @dataclass
 class LoggedSchedule:
-    """A schedule known only by a log's record, its class not importable here: named as
-    :meth:`Schedule.label` and :meth:`Schedule.tag` name a class without its own (its class name in lower case
-    and every setting); its rates are the logged ones. ``adaptive``: whether its runs' logs disagree
+    """A schedule known only by a log's record, its class not importable here or unfit (:func:`logged_schedule`):
+    named as :meth:`Schedule.label` and :meth:`Schedule.tag` name a class without its own (its class name in lower
+    case and every setting); its rates are the logged ones. ``adaptive``: whether its runs' logs disagree
     (:func:`_tables` decides)."""
 
     record: dict[str, Any]
@@ -275,7 +277,7 @@ def _distinguish(labels: list[str], settings: list[dict[str, Any]], groups: list
 class ReadLog(NamedTuple):
     """One readable log: ``row`` its RUN_COLUMNS values (but run and config), ``settings`` the dotted
     config fields that define its configuration, ``columns`` EPOCH_FIELDS name -> array of shape (epochs,);
-    ``missing`` the error naming its schedule class when that cannot be imported here ("" if it can),
+    ``missing`` the error naming its schedule class when that cannot label it (:func:`logged_schedule`; "" if it can),
     ``mismatch`` where today's class gives other rates than the log ("" if it gives the logged ones)."""
 
     row: dict[str, Any]
@@ -290,17 +292,50 @@ RATE_TOLERANCE = 1e-9  # a class's rate this close to the logged one gives it (t
 
 
 def logged_schedule(record: dict[str, Any]) -> tuple[Schedule | LoggedSchedule, str]:
-    """The schedule of a log's record and "", or, when its class cannot be imported here, a
-    :class:`LoggedSchedule` and the error naming the class."""
+    """The schedule of a log's record and "", or, when its class cannot be imported here, refuses the logged
+    settings (a value, or settings renamed since: :func:`unfit_settings`) or cannot name it
+    (:func:`naming_error`), a :class:`LoggedSchedule` and the error naming the class."""
     try:
-        return schedule_from_record(record), ""
+        schedule = schedule_from_record(record)
     except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
         return LoggedSchedule(dict(record)), str(err)
+    error = unfit_settings(record, schedule) or naming_error(schedule)
+    return (LoggedSchedule(dict(record)), error) if error else (schedule, "")
+
+
+def unfit_settings(record: dict[str, Any], schedule: Schedule) -> str:
+    """Why today's class (``schedule``, built from the log's ``record``) does not fit the logged settings: a
+    logged one it lacks, or one of its own the log lacks (but a setting added since at its earlier value,
+    HASHED_UNLESS); "" where they fit."""
+    today = schedule.record()
+    earlier = {key.removeprefix("schedule."): value for key, value in HASHED_UNLESS.items()
+               if key.startswith("schedule.")}
+    extra = [name for name in record if name not in today]
+    lacking = [name for name in today if name not in record and (name not in earlier or earlier[name] != today[name])]
+    if not extra and not lacking:
+        return ""
+    logged = " ".join(f"{name}={shown_value(value)}" for name, value in record.items() if name != "kind")
+    why = [*([f"the log's {', '.join(extra)}: no setting of it"] if extra else []),
+           *([f"its {', '.join(lacking)}: not in the log"] if lacking else [])]
+    return f"schedule class {record['kind']} does not take the logged settings {logged} ({'; '.join(why)})"
+
+
+def naming_error(schedule: Schedule) -> str:
+    """The error naming a class whose ``label()`` or ``tag()`` raises or gives no str; "" where both name it."""
+    for method in (schedule.label, schedule.tag):
+        where = f"schedule class {kind_name(type(schedule))}: its {method.__name__}()"
+        try:
+            name = method()
+        except Exception as err:  # noqa: BLE001 - a user's method: named in one line, the log's record labels it
+            return f"{where} raised {raised(err)}; fix that class"
+        if not isinstance(name, str):
+            return f"{where} gave {name!r}, a {type(name).__name__}, not a str; fix that class"
+    return ""
 
 
 def _run_row(meta: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], Schedule | LoggedSchedule, str]:
     """One run's columns from its metadata, its configuration-defining settings, its schedule and the error
-    naming the schedule's class when that cannot be imported ("" if it can); mu_eps is left to the rates."""
+    naming the schedule's class when that cannot label it ("" if it can); mu_eps is left to the rates."""
     config = meta["config"]
     schedule, missing = logged_schedule(config["schedule"])
     record = schedule.record if missing else schedule.record()
@@ -373,7 +408,7 @@ def logged_mean_rate(schedule: Schedule | LoggedSchedule, total_epochs: int, log
 def read_log(path: Path, folder: Path) -> ReadLog | str:
     """One log -> :class:`ReadLog`, or the line saying why it was skipped (``"<path>: <reason>"``, the path
     relative to ``folder``). A damaged log gives the epochs written before the damage; a log whose schedule class
-    cannot be imported here is read all the same (:class:`LoggedSchedule`)."""
+    cannot label it is read all the same (:func:`logged_schedule`)."""
     shown = path.relative_to(folder).as_posix()
     try:
         log = read_records(path)
@@ -393,8 +428,17 @@ def read_log(path: Path, folder: Path) -> ReadLog | str:
 
 
 def find_logs(folder: Path) -> list[Path]:
-    """Every run log below ``folder``, in path order."""
-    return sorted(Path(folder).rglob(LOG_NAME))
+    """Every run log below ``folder`` (whatever is named ``run.mcap`` but a folder), in path order."""
+    return sorted(path for path in Path(folder).rglob(LOG_NAME) if not path.is_dir())
+
+
+def checked_folder(folder: str | Path) -> Path:
+    """``folder`` as a Path; ReportInputError (one line) when it is not a folder: a file, or nothing."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        what = "is a file, not a folder" if folder.exists() else "does not exist"
+        raise ReportInputError(f"FOLDER {folder} {what}; give a folder of run logs ({LOG_NAME} files)")
+    return folder
 
 
 class LogReading:
@@ -466,15 +510,16 @@ def _first_start(log: ReadLog) -> Any:
 
 
 def missing_schedule_lines(missing: list[MissingSchedule]) -> list[str]:
-    """One line per schedule class that cannot be imported (its error, naming the class), with the logs read
-    without it (from their rates, labelled from their records) and how to give them the class's own label."""
+    """One line per error of :func:`logged_schedule` (naming the class), with the logs read without the class
+    (from their rates, labelled from their records) and how to give them the class's own label."""
     paths: dict[str, list[str]] = {}
     for log in missing:
         paths.setdefault(log.error, []).append(log.path)
     fixes = {"; is its module on PYTHONPATH?": "put the folder holding the class's module on PYTHONPATH "
                                                "(PYTHONPATH=<folder> hersd-report ...)",
              "; is the class's name right?": "give its module that class again (the log names it as it was)",
-             "; fix that module": "fix that module"}  # hersd.contract.plugins.class_at's three endings
+             "; fix that module": "fix that module",  # hersd.contract.plugins.class_at's three endings
+             "; fix that class": "fix that class"}  # naming_error's
     lines = []
     for error, shown in paths.items():
         ending = next((end for end in fixes if error.endswith(end)), None)
@@ -499,9 +544,9 @@ def rate_mismatch_lines(configs: list[str], logs: list[ReadLog]) -> list[str]:
 
 
 def _settle_logged(rows: list[dict[str, Any]], logs: list[ReadLog]) -> None:
-    """Runs whose schedule class cannot be imported: adaptive when two logs of one schedule and K hold other
-    rates at an epoch both reached (a fixed schedule gives every run the same); then, in progress, their mean
-    logged rate so far as mu_eps."""
+    """Runs whose schedule class cannot label them (:func:`logged_schedule`): adaptive when two logs of one
+    schedule and K hold other rates at an epoch both reached (a fixed schedule gives every run the same); then, in
+    progress, their mean logged rate so far as mu_eps."""
     groups: dict[tuple, list[int]] = {}
     for index, log in enumerate(logs):
         if log.missing:
@@ -522,9 +567,7 @@ def start_reading(folder: str | Path) -> LogReading:
     there are PARALLEL_FROM or more, so the caller can do other work meanwhile (the report imports
     its drawing modules); ``.result(tasks, algos)`` waits and gives the :class:`RunTable`.
     Raises :class:`ReportInputError` when the folder has no logs."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise ReportInputError(f"{folder} is not a folder")
+    folder = checked_folder(folder)
     paths = find_logs(folder)
     if not paths:
         raise ReportInputError(f"no {LOG_NAME} files under {folder}")

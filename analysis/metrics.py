@@ -27,9 +27,9 @@ from fractions import Fraction
 import numpy as np
 import pandas as pd
 
-from analysis.load import HER_EPS, HER_WEIGHTS, RATE_TOLERANCE
+from analysis.load import HER_EPS, HER_WEIGHTS, RATE_TOLERANCE, logged_schedule
 from hersd.contract.config import PAPER_LEARNER
-from hersd.contract.schedules import schedule_from_record, schedule_rank
+from hersd.contract.schedules import schedule_rank
 from hersd.contract.tasks import task_rank
 
 GROUP = ["task", "config"]
@@ -693,15 +693,17 @@ def line_label(configs: list[str], run: pd.Series) -> str:
 def fixed_rates(record: str, total_epochs: int, logged: pd.Series) -> tuple[np.ndarray, np.ndarray]:
     """(epoch, eps) of a schedule that does not adapt: the ``logged`` rates (epoch -> rate, shape (n,)), and for the
     epochs 1..K none of its runs has logged yet, the rates of its class (``record``: the schedule's record as JSON)
-    when that class can be imported and gives every logged rate; else the logged epochs alone."""
+    when that class can be imported, takes the logged settings (:func:`analysis.load.logged_schedule`) and gives
+    every logged rate; else the logged epochs alone."""
     epoch, eps = logged.index.to_numpy(dtype=int), logged.to_numpy(dtype=float)
     if len(epoch) >= total_epochs:
         return epoch, eps
     try:
-        rates = schedule_from_record(json.loads(record)).epoch_rates(total_epochs)
-    except Exception:  # noqa: BLE001 - a class not importable here, or whose rate raises: the logged rates alone
+        schedule, unfit = logged_schedule(json.loads(record))
+        rates = None if unfit else schedule.epoch_rates(total_epochs)
+    except Exception:  # noqa: BLE001 - a class whose rate raises: the logged rates alone
         return epoch, eps
-    if not np.allclose(rates[epoch - 1], eps, rtol=0.0, atol=RATE_TOLERANCE):
+    if rates is None or not np.allclose(rates[epoch - 1], eps, rtol=0.0, atol=RATE_TOLERANCE):
         return epoch, eps
     rates[epoch - 1] = eps
     return np.arange(1, total_epochs + 1), rates

@@ -51,7 +51,7 @@ from analysis.animations import (FOLDER as ANIMATIONS, animations_html, choose_a
                                  place_after_curves)
 from analysis.claims import full_claims_table
 from analysis.critic import GOAL_TYPES, bias_evaluations, bias_tests, integrated_bias
-from analysis.load import ReportInputError, RunTable, start_reading
+from analysis.load import ReportInputError, RunTable, checked_folder, start_reading
 from analysis.metrics import (GROUP, PAPER_COMPOSITION_EPOCH, PAPER_COMPOSITION_TASK, RUN_OUTCOME_COLUMNS, run_state,
                               run_states)
 from analysis.provenance import provenance_html, provenance_table, run_cost
@@ -716,6 +716,8 @@ def _tensorboard(args: argparse.Namespace) -> int:
         print(f"hersd-report: error: cannot write the event files to {args.tensorboard}: {err.strerror} "
               f"({err.filename}); choose another --tensorboard folder", file=sys.stderr)
         return 2
+    for line in table.warnings():  # the logs left out, damaged, failed: as the report names them
+        print(f"warning: {line}", file=sys.stderr)
     print(f"TensorBoard event files of {len(written)} runs written to {args.tensorboard} "
           f"(tensorboard --logdir {args.tensorboard})")
     return 0

@@ -418,3 +418,54 @@ def test_a_schedule_module_that_exits_as_it_is_imported_is_one_warning_not_the_r
     lines = metrics.schedule_curves(table.runs, table.epochs)  # Fig. 1
     assert lines.loc[lines["line"].str.contains("step k0=3"), "epoch"].tolist() == [1, 2, 3]  # the logged epochs
     assert report_main([str(tmp_path), "--smooth", "2", "--out", str(tmp_path / "report")]) == 0  # its figures too
+
+
+@pytest.mark.parametrize("module, edit, why", [
+    ("renamed_setting_load", ("k0", "k1"), "the log's k0: no setting of it; its k1: not in the log"),
+    ("added_setting_load", ("    def rate", "    floor: float = param(0.0, 0.0, 1.0, \"the lowest rate\")\n\n"
+                                           "    def rate"), "its floor: not in the log"),
+])
+def test_a_class_whose_settings_changed_since_its_runs_labels_them_from_the_log_in_one_warning(tmp_path, monkeypatch,
+                                                                                              module, edit, why):
+    """k0 renamed k1 (default 1, the same rates): the runs were labelled ``kstep ... k1=1``, a setting they never
+    had, k0 dropped in silence, and the class's rates completed the run in progress (issue 68, item 1)."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / f"{module}.py").write_text(EDITED_STEP.replace("{compare}", "<=").replace(*edit))
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    _write_step_runs(tmp_path / "runs", module)
+    table = load_runs(tmp_path / "runs")
+    steps = table.runs[table.runs["schedule"] == f"{module}.KStep"].set_index("path")
+    assert steps["config"].astype(str).tolist() == ["kstep high=0.9 low=0.5 k0=1 K=2"] * 2 + ["kstep high=0.9 low=0.5 "
+                                                                                          "k0=1 K=3"]
+    assert np.isnan(steps.loc["step2/run.mcap", "mu_eps"])  # in progress: the class's rates are not its
+    assert _rates_of(table, "kstep high=0.9 low=0.5 k0=1 K=3") == [0.9]
+    assert table.missing_schedules == [
+        f"schedule class {module}.KStep does not take the logged settings high=0.9 low=0.5 k0=1 ({why}): 3 run logs "
+        "reported from their logged rates and labelled from the log (step0/run.mcap and others); make its class "
+        "accept the logged settings for the class's own label and a check of its rates"]
+
+
+def test_a_class_whose_label_raises_labels_its_runs_from_the_log_in_one_warning(tmp_path, monkeypatch):
+    """Its runs were skipped as unreadable logs, "run metadata lacks or mistypes a config field (label boom)"."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "raising_label_load.py").write_text(EDITED_STEP.replace("{compare}", "<=") + (
+        "\n    def label(self):\n        raise ValueError(\"label boom\")\n"))
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    _write_step_runs(tmp_path / "runs", "raising_label_load")
+    table = load_runs(tmp_path / "runs")
+    assert table.left_out == 0 and not table.skipped
+    steps = table.runs[table.runs["schedule"] == "raising_label_load.KStep"]
+    assert set(steps["config"].astype(str)) == {"kstep high=0.9 low=0.5 k0=1 K=2", "kstep high=0.9 low=0.5 k0=1 K=3"}
+    assert table.missing_schedules == [
+        "schedule class raising_label_load.KStep: its label() raised ValueError: label boom: 3 run logs reported from "
+        "their logged rates and labelled from the log (step0/run.mcap and others); fix that class for the class's own "
+        "label and a check of its rates"]
+
+
+def test_a_folder_named_run_mcap_is_no_log(tmp_path):
+    """It was skipped as ``b/run.mcap: .../b/run.mcap/run.mcap: cannot open``, naming a path that does not exist."""
+    write_run(tmp_path / "a", make_config(), np.zeros(2))
+    (tmp_path / "b" / "run.mcap").mkdir(parents=True)
+    assert load.find_logs(tmp_path) == [tmp_path / "a" / "run.mcap"]
+    table = load_runs(tmp_path)
+    assert len(table.runs) == 1 and not table.skipped and table.left_out == 0

@@ -57,6 +57,19 @@ def test_an_out_that_is_or_passes_through_a_file_is_one_line_error_exit_2(hand_s
     assert (tmp_path / "a_file").read_text() == "mine"
 
 
+@pytest.mark.parametrize("given, what", [("a_file", "is a file, not a folder"), ("nothing", "does not exist")])
+def test_a_folder_that_is_a_file_or_nothing_is_one_line_error_exit_2_before_the_out_check(capsys, tmp_path, given,
+                                                                                           what):
+    """``hersd-report afile`` said to give --out a folder (afile/report passing through a file): the input is
+    the fault."""
+    (tmp_path / "a_file").write_text("mine")
+    assert exit_status([str(tmp_path / given)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"hersd-report: error: FOLDER {tmp_path / given} {what}; give a folder of run logs (run.mcap "
+                   "files)\n")
+    assert (tmp_path / "a_file").read_text() == "mine"
+
+
 def test_report_writes_tables_figures_and_self_contained_html(sweep, tmp_path, capsys):
     out = tmp_path / "report"
     assert report_main([str(sweep), "--out", str(out), "--smooth", "3"]) == 0
