@@ -77,21 +77,21 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     at_once = concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"])
     if at_once is not None:  # they train here: skip now what this machine cannot run (all of them: refused)
         planned = trainable_here(planned, states)
+    runs = [run for directory, run in planned.items() if states[directory] != "complete"]
+    sweep_dir = Path(sweeper.config.hydra.sweep.dir)
+    if runs:  # below results_dir, like every run's folder; a dry run checks it too, leaving no folder behind
+        try:
+            check_writable(sweep_dir, keep=not sweeper.dry_run)
+        except ConfigError as err:
+            raise SweepError(str(err), exit_code=2) from None
     if sweeper.dry_run:
         list_runs(planned, at_once)
         return []
-
-    runs = [run for directory, run in planned.items() if states[directory] != "complete"]
     if not runs:
         return []
     threads = auto_threads(sweeper.config.hydra.launcher, len(runs)) if sweep_threads == "auto" else None
     specs = dict(launched(run, threads) for run in runs)
     to_launch = [list(job) for job in specs]
-    sweep_dir = Path(sweeper.config.hydra.sweep.dir)
-    try:  # below results_dir, like every run's folder
-        check_writable(sweep_dir)
-    except ConfigError as err:
-        raise SweepError(str(err), exit_code=2) from None
     save_specs(sweep_dir, specs, len(to_launch))  # a full disk: exit 2
     with watched_by_jobs(sweeper.launcher, len(to_launch), here=at_once is not None):  # jobs here end with this
         results = launch_jobs(sweeper, to_launch)
@@ -100,10 +100,11 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
 
 
 def list_runs(planned: dict, at_once: int | None) -> None:
-    """The dry run's listing: one line per run, in launch order, with its state (:mod:`sweeps.status`),
+    """The dry run's listing: one line per run, in launch order, with its state (:func:`run_status`),
     directory, progress and job; then the runs training now with their pids, and what is left
     (:func:`sweeps.status.time_to_go`; ``at_once``: runs sharing this machine, None on a cluster)."""
-    from sweeps.status import run_status, time_to_go
+    from hersd.contract.runstore import run_status
+    from sweeps.status import time_to_go
     statuses = []
     for directory, run in planned.items():
         status = run_status(directory, run.epochs)
@@ -264,11 +265,14 @@ def main() -> None:
         import hydra
 
         from hersd.contract.compose import CONFIG_PATH, explain_config_error, null_group
+        from hersd.engine.cli import unknown_option
         from sweeps.plan import register_schemas
 
         if any(arg in ("-h", "--help") for arg in sys.argv[1:]):
             print(usage())
             return
+        if said := unknown_option(sys.argv[1:], "hersd-sweep", ("-h", "--help", "--dry-run")):
+            raise ConfigError(said)  # before --dry-run becomes hydra.sweeper.dry_run=true: what the user typed
         if "--dry-run" in sys.argv:
             signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # a listing: a reader gone (``| head``) ends it quietly
             sys.argv = [arg for arg in sys.argv if arg != "--dry-run"] + ["hydra.sweeper.dry_run=true"]

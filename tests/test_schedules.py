@@ -439,3 +439,42 @@ def test_the_rising_preset_is_linear_025_reversed_and_the_late_rate_preset_is_co
     assert np.array_equal(rising.epoch_rates(200), decay.epoch_rates(200)[::-1])
     late = compose_train(["schedule=constant_075"]).schedule
     assert (late.tag(), late.exact_mean_rate(200)) == ("constant-0.75", 0.75) == (late.tag(), decay.rate(200, 200))
+
+
+@pytest.mark.parametrize("read", [len, list, bool, lambda history: history[-1], lambda history: np.asarray(history).size,
+                                  lambda history: history.index(1.0)])
+def test_a_fixed_schedule_whose_rate_reads_train_success_is_refused_in_one_line(read):
+    """Its fixed rates were computed once, with train_success=(): ``0.3 if len(train_success) else 0.9`` without
+    ``adaptive = True`` trained at 0.9 in every epoch."""
+    from hersd.contract.errors import ConfigError
+    from hersd.contract.schedules import Schedule
+    from hersd.contract.schedules.base import check_rates
+
+    @dataclass
+    class ReadsSuccess(Schedule):
+        def rate(self, k, total_epochs, train_success=()):
+            return 0.3 if read(train_success) else 0.9
+
+    with pytest.raises(ConfigError) as error:
+        check_rates(ReadsSuccess(), 4)
+    assert str(error.value) == (f"{__name__}.{ReadsSuccess.__qualname__}.rate reads train_success: declare adaptive "
+                                "= True in the class (docs/ARCHITECTURE.md, \"Add a schedule\")")
+    ReadsSuccess.adaptive = True
+    assert check_rates(ReadsSuccess(), 4) is None
+
+
+def test_hersd_train_stops_a_fixed_schedule_reading_train_success_before_any_work(tmp_path, monkeypatch, capsys):
+    from helpers import TINY
+
+    from hersd.engine.cli import main
+
+    (tmp_path / "reads_success.py").write_text(
+        "from dataclasses import dataclass\nfrom hersd.contract.schedules import Schedule\n\n\n@dataclass\n"
+        "class ReadsSuccess(Schedule):\n    def rate(self, k, total_epochs, train_success=()):\n"
+        "        return 0.3 if len(train_success) else 0.9\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, "schedule._target_=reads_success.ReadsSuccess", "epochs=3", f"results_dir={tmp_path / 'runs'}"])
+    assert exit_info.value.code == 2 and not (tmp_path / "runs").exists()
+    assert capsys.readouterr().err == ("hersd-train: error: reads_success.ReadsSuccess.rate reads train_success: declare "
+                                       "adaptive = True in the class (docs/ARCHITECTURE.md, \"Add a schedule\")\n")

@@ -13,8 +13,8 @@ import numpy as np
 
 from analysis.synthetic import write_run
 from hersd.contract.config import TrainConfig
-from hersd.contract.runstore import RunFolder
-from sweeps.status import RunStatus, run_status, time_to_go
+from hersd.contract.runstore import RunFolder, RunStatus, run_status
+from sweeps.status import time_to_go
 
 SWEEP = [sys.executable, "-c", "from sweeps.launch import main; main()"]
 

@@ -96,12 +96,24 @@ def test_a_setting_fixed_for_every_swept_schedule_is_checked_on_each_not_on_the_
                                                                               "exponential-b1_0.3-b2_0.25"]
 
 
-def test_an_unwritable_results_dir_is_one_line_and_exit_2_before_any_run(tmp_path):
+@pytest.mark.parametrize("dry_run", [[], ["--dry-run"]])  # the dry run listed the runs as new, exit 0
+def test_an_unwritable_results_dir_is_one_line_and_exit_2_before_any_run(tmp_path, dry_run):
     (tmp_path / "a_file").write_text("not a folder")
-    result = sweep("+grid=smoke", f"results_dir={tmp_path / 'a_file' / 'runs'}", check=False)
+    result = sweep("+grid=smoke", f"results_dir={tmp_path / 'a_file' / 'runs'}", *dry_run, check=False)
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith(f"hersd-sweep: error: results_dir: cannot write to {tmp_path / 'a_file' / 'runs'}")
     assert result.stderr.rstrip().endswith("pass results_dir=<a writable folder>")
+    assert [path.name for path in tmp_path.iterdir()] == ["a_file"]
+
+
+@pytest.mark.parametrize("args", [["task=reach", "--bogus"], ["--dry-run", "--bogus", "results_dir=RESULTS"]])
+def test_an_unknown_option_is_one_line_naming_only_what_was_typed_with_exit_2(tmp_path, args):
+    """It printed argparse's usage (8 lines), or with --dry-run named its rewrite, hydra.sweeper.dry_run=true."""
+    result = sweep(*[arg.replace("RESULTS", str(tmp_path)) for arg in args], check=False)
+    assert result.returncode == 2
+    assert result.stderr == ("hersd-sweep: error: unknown option --bogus; hersd-sweep takes -h, --help, --dry-run and "
+                             "KEY=VALUE overrides (hersd-sweep --help lists them)\n")
+    assert not any(tmp_path.iterdir())
 
 
 def test_hydra_full_error_still_gives_the_traceback(tmp_path):

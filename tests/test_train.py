@@ -460,6 +460,46 @@ def test_dry_run_prints_the_resolved_run_and_writes_nothing(tmp_path, capsys):
     assert not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize("overrides", ["results_dir={tmp}/file", "device=cuda results_dir={tmp}/runs"])
+def test_dry_run_refuses_what_the_real_command_refuses_with_its_one_line_and_writes_nothing(
+        tmp_path, capsys, monkeypatch, overrides):
+    """An unwritable results_dir, a device this machine lacks: the dry run printed ``(new)``, exit 0."""
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)  # a machine without CUDA
+    (tmp_path / "file").write_text("not a folder")
+    args = [*TINY, *overrides.format(tmp=tmp_path).split()]
+    errors = []
+    for dry_run in (["--dry-run"], []):
+        with pytest.raises(SystemExit) as exit_info:
+            main([*args, *dry_run])
+        assert exit_info.value.code == 2
+        errors.append(capsys.readouterr().err)
+        if dry_run:
+            assert [path.name for path in tmp_path.iterdir()] == ["file"]
+    assert errors[0] == errors[1] and errors[0].count("\n") == 1, errors
+
+
+def test_dry_run_shows_a_run_stopped_by_an_error_as_failed_as_a_sweeps_dry_run_does(tmp_path, capsys):
+    """A run whose error.log is newer than its log (hersd-sweep --dry-run: ``failed``): it showed ``(resumable)``."""
+    args, directory = _stopped_after_epoch_1(tmp_path)
+    (directory / "error.log").write_text('Traceback (most recent call last):\n  File "x.py", line 1, in <module>\n'
+                                         "    boom()\nRuntimeError: boom at epoch 2\n")
+    main([*args, "--dry-run"])
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith(f"run: {directory} (failed: RuntimeError: boom at epoch 2, epoch 1 of 3, "), first
+
+
+@pytest.mark.parametrize("option", ["--bogus", "--dry-run=1"])
+def test_an_unknown_option_is_one_line_naming_it_and_what_the_command_takes_with_exit_2(tmp_path, capsys, option):
+    """It reached Hydra's override parser: ``LexerNoViableAltException: --bogus ^ See https://hydra.cc/...``."""
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, f"results_dir={tmp_path}", "--dry-run", option])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (f"hersd-train: error: unknown option {option}; hersd-train takes -h, --help, "
+                                       "--dry-run and KEY=VALUE overrides (hersd-train --help lists them)\n")
+
+
 def _fill_the_disk_at_epoch_3(monkeypatch, where: str) -> None:
     """From epoch 3 on the disk is full: the log's write (its fsync, where a full disk can first show) or the
     checkpoint's torch.save (some bytes written, then torch's RuntimeError raised while its OSError is handled,

@@ -16,6 +16,21 @@ The hash covers every config field that changes what the run computes
 config always maps to the same one: that is what lets sweeps skip and resume runs.
 :func:`run_identity` is that identity, for a config or for the config a log's metadata holds
 (however old the log): the report groups runs with it too.
+
+A run's state as ``hersd-sweep --dry-run`` lists it and ``hersd-train --dry-run`` shows it (:func:`run_status`),
+read from these files only, so it works while runs are training:
+
+- ``complete``   the log has its complete marker;
+- ``running``    a live process holds the run's lock (the pid it recorded in ``run.lock``):
+                 ``epoch N of K``, that pid, the recent pace and the time to go;
+- ``failed``     it stopped with an error (``error.log`` newer than its log): the error's first line, the
+                 epochs logged; a re-run resumes it (a checkpoint) or starts it afresh;
+- ``resumable``  ``epoch N of K`` logged and a checkpoint to resume from;
+- ``new``        nothing yet, or a log without checkpoint (set aside when the run starts again).
+
+Runs started by hersd before lock files recorded pids show as ``resumable`` while they train;
+the age of their last epoch tells the two apart. A run with logged epochs also shows how it learns: its
+mean test success over its last RECENT_EPOCHS.
 """
 
 from __future__ import annotations
@@ -26,10 +41,11 @@ import hashlib
 import json
 import os
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
+from itertools import takewhile
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, NamedTuple, Sequence
 
 from hersd.contract.config import PAPER_LEARNER, TrainConfig, config_record, learner_key
 from hersd.contract.errors import ConfigError
@@ -203,6 +219,76 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
+PACE_EPOCHS = 5  # a run's pace: the mean time of its last this many epochs
+RECENT_EPOCHS = 10  # how a run learns at a glance: its mean test success over its last this many epochs
+
+
+def ago(seconds: float) -> str:
+    """``25 s``, ``14 min``, ``3.2 h``."""
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min" if seconds < 7200 \
+        else f"{seconds / 3600:.1f} h"
+
+
+class RunStatus(NamedTuple):
+    """A run's state and detail (a sweep's listing, hersd-train's dry run), the epochs it has left, and, while it trains,
+    its pace (seconds per epoch, the mean of its last PACE_EPOCHS) and the pid holding its lock."""
+
+    state: str
+    detail: str
+    epochs_left: int
+    pace: float | None = None
+    holder: int | None = None
+
+
+def recent_success(records: Sequence[dict]) -> str:
+    """``test success 0.35 over its last 10 epochs``: the mean of the last RECENT_EPOCHS epochs' test success
+    (``records``: the log's epoch records, at least one)."""
+    recent = [record["test_success"] for record in records[-RECENT_EPOCHS:]]
+    return f"test success {sum(recent) / len(recent):.2f} over its last {len(recent)} epoch{'s' * (len(recent) > 1)}"
+
+
+def run_status(directory: Path, epochs: int, now: float | None = None) -> RunStatus:
+    """The status of the run in ``directory`` planned for ``epochs`` epochs, e.g. state ``running``, detail
+    ``epoch 45 of 200, pid 1701, 31 s per epoch, ~2.7 h to go, last epoch 12 s ago, test success 0.35 over its
+    last 10 epochs``, 155 epochs left, pace 31."""
+    folder = RunFolder(directory)
+    holder = folder.holder()
+    done: list = []
+    detail = []
+    pace = None
+    try:
+        records = folder.records()
+    except RunLogError as err:
+        detail.append(f"log unreadable ({str(err).removeprefix(f'{folder.log}: ')})")
+    else:
+        if records is not None and records.complete:
+            return RunStatus("complete", f"{len(records.records)} epochs, {recent_success(records.records)}", 0)
+        if records is not None:
+            done = records.records
+            detail.append(f"epoch {len(done)} of {epochs}")
+    if not done and holder is not None and not detail:
+        detail.append(f"epoch 0 of {epochs}")
+    if holder is not None:
+        detail.append(f"pid {holder}")
+        recent = [record["epoch_seconds"] for record in done[-PACE_EPOCHS:]]
+        if recent:
+            pace = sum(recent) / len(recent)
+            detail.append(f"{pace:.0f} s per epoch, ~{ago(pace * max(epochs - len(done), 0))} to go")
+    if done:
+        detail.append(f"last epoch {ago(max(0.0, (now or time.time()) - folder.log.stat().st_mtime))} ago")
+        detail.append(recent_success(done))
+    left = max(epochs - len(done), 0)
+    if holder is not None:
+        return RunStatus("running", ", ".join(detail), left, pace, holder)
+    if (error := folder.error()) is not None:
+        return RunStatus("failed", ", ".join([error, *detail]), left if folder.checkpoint.exists() else epochs)
+    if folder.checkpoint.exists():
+        return RunStatus("resumable", ", ".join(detail), left)
+    if detail:
+        detail.append("no checkpoint: starts afresh, the log kept aside")
+    return RunStatus("new", ", ".join(detail), epochs)
+
+
 def error_line(text: str) -> str:
     """The first line of the error a traceback's text ends with (the first line after its last frame's
     ``  File ...`` line and the code lines under it), else the text's first non-empty line; ``unknown error``
@@ -233,8 +319,10 @@ def keep_aside(path: Path, why: str) -> Path:
     return kept
 
 
-def check_writable(directory: Path, key: str = "results_dir") -> None:
-    """Fail early (ConfigError naming the setting ``key``) if ``directory`` cannot be created or written."""
+def check_writable(directory: Path, key: str = "results_dir", keep: bool = True) -> None:
+    """Fail early (ConfigError naming the setting ``key``) if ``directory`` cannot be created or written; ``keep``
+    False (a dry run): the same check, the folders it created removed again."""
+    created = list(takewhile(lambda folder: not folder.exists(), (directory, *directory.parents)))
     try:
         directory.mkdir(parents=True, exist_ok=True)
         probe = directory / f".write-test-{os.getpid()}"
@@ -243,6 +331,10 @@ def check_writable(directory: Path, key: str = "results_dir") -> None:
     except OSError as err:
         raise ConfigError(f"{key}: cannot write to {directory} ({err.strerror}); "
                           f"pass {key}=<a writable folder>") from None
+    finally:
+        for folder in () if keep else created:  # deepest first
+            with suppress(OSError):
+                folder.rmdir()
 
 
 def check_run_path(directory: Path, top: Path, key: str = "results_dir") -> None:

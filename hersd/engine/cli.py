@@ -191,8 +191,8 @@ def usage(argv: list[str] = ()) -> str:
         "usage: hersd-train [KEY=VALUE ...] [--dry-run]", "",
         "Runs one DDPG+HER training run and prints the path of its MCAP log; re-running the same",
         "command resumes an interrupted run from its last checkpoint. Defaults are the seed paper's",
-        "appendix settings. --dry-run prints the resolved run (its folder and state, its identity,",
-        "every setting) and trains nothing. See docs/ARCHITECTURE.md.", "",
+        "appendix settings. --dry-run makes the same checks, then prints the resolved run (its folder",
+        "and state, its identity, every setting) and trains nothing. See docs/ARCHITECTURE.md.", "",
         "config groups (conf/<group>/*.yaml):", *groups, "",
         "keys (key=default  meaning; a group's keys also take values after its choice, e.g. schedule.beta1=0.5):",
         *schema_lines(TrainConfig), "",
@@ -204,12 +204,15 @@ def usage(argv: list[str] = ()) -> str:
 
 
 def dry_run_lines(spec: RunSpec) -> list[str]:
-    """``--dry-run``: the resolved run: its folder and state (:meth:`RunFolder.state`), its identity (the hash
-    of :func:`run_identity`) and every setting as ``key=value``, nested ones flattened with dots."""
+    """``--dry-run``: the resolved run: its folder and state as a sweep's dry run lists it (:func:`run_status`, e.g.
+    ``failed: <its error's first line>, epoch 1 of 3``), its identity (the hash of :func:`run_identity`) and every
+    setting as ``key=value``, nested ones flattened with dots."""
     from hersd.contract.config import config_record
-    from hersd.contract.runstore import RunFolder
+    from hersd.contract.runstore import run_status
 
-    lines = [f"run: {spec.folder} ({RunFolder(spec.folder).state()})", f"identity: {spec.run_id}", "settings:"]
+    status = run_status(spec.folder, spec.config.epochs)
+    state = f"{status.state}: {status.detail}" if status.detail else status.state
+    lines = [f"run: {spec.folder} ({state})", f"identity: {spec.run_id}", "settings:"]
     pending = list(config_record(spec.config).items())
     while pending:
         key, value = pending.pop(0)
@@ -228,27 +231,38 @@ def _fail(message: str, code: int = 2) -> None:
 
 def checked_run(argv: list[str], writes: bool = True) -> RunSpec:
     """The resolved run of a command line (:func:`hersd.contract.runspec.resolve`), its folders checked (created,
-    writable, no file where the run's folder goes) unless nothing is to be written (``writes`` False: a dry run);
-    bad input ends the command with one line and exit code 2."""
+    writable, no file where the run's folder goes; ``writes`` False, a dry run: the folders created to check are
+    removed again) and this machine (:func:`check_machine`: its device and precision); bad input ends the command
+    with one line and exit code 2."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
     from hersd.contract.compose import compose_train, explain_config_error
     from hersd.contract.runspec import resolve
     from hersd.contract.runstore import check_run_path, check_writable
+    from hersd.engine.resources import check_machine  # torch loads only for a device or precision that needs it
 
     try:
         spec = resolve(compose_train(argv))
-        if writes and spec.config.run_dir is None:
-            check_writable(Path(spec.config.results_dir))
+        if spec.config.run_dir is None:
+            check_writable(Path(spec.config.results_dir), keep=writes)
             check_run_path(spec.folder, Path(spec.config.results_dir))
-        elif writes:
-            check_writable(spec.folder, "run_dir")
+        else:
+            check_writable(spec.folder, "run_dir", keep=writes)
+        check_machine(*spec.machine)
     except ConfigError as err:
         _fail(str(err))
     except (HydraException, OmegaConfBaseException) as err:
         _fail(explain_config_error(err))
     return spec
+
+
+def unknown_option(argv: list[str], command: str, options: tuple[str, ...]) -> str | None:
+    """The one-line error for the first option (``-...``) of a command line that ``command`` does not take (its
+    ``options``; the rest of its command line is KEY=VALUE overrides), None when there is none."""
+    unknown = [arg for arg in argv if arg.startswith("-") and arg not in options]
+    return (f"unknown option {unknown[0]}; {command} takes {', '.join(options)} and KEY=VALUE overrides "
+            f"({command} --help lists them)") if unknown else None
 
 
 @sigterm_as_ctrl_c()  # ``kill PID`` too: one line, exit 130, the finished epochs kept
@@ -265,6 +279,8 @@ def main(argv: list[str] | None = None) -> None:
             except ConfigError as err:
                 _fail(str(err))
             return
+        if said := unknown_option(argv, "hersd-train", (*HELP_FLAGS, DRY_RUN_FLAG)):
+            _fail(said)
         dry_run = DRY_RUN_FLAG in argv
         argv = [arg for arg in argv if arg != DRY_RUN_FLAG]
         spec = checked_run(argv, writes=not dry_run)
@@ -274,13 +290,11 @@ def main(argv: list[str] | None = None) -> None:
             return
         from hersd.contract.runstore import RunLockedError
         from hersd.contract.schedules import ScheduleRateRaised
-        from hersd.engine.resources import check_machine  # torch and MuJoCo load only once the input is valid
-        from hersd.engine.train import NonFiniteLossError, RunStateError, train
+        from hersd.engine.train import NonFiniteLossError, RunStateError, train  # torch and MuJoCo: the input valid
     except KeyboardInterrupt:
         print("hersd-train: interrupted before training began; re-run the same command to start", file=sys.stderr)
         sys.exit(130)
     try:
-        check_machine(*spec.machine)
         log_path = train(spec, command=" ".join(["hersd-train", *argv]))
     except ConfigError as err:
         _fail(str(err))

@@ -8,7 +8,8 @@ run), the folder tag and the report's label (both by default from the class name
 the kind it equals (:meth:`Schedule.equivalent`) and the record logs keep (the run's identity).
 Every rate must lie in [0, 1]: a fixed schedule's are checked when its run is resolved
 (:func:`check_rates`, its first CHECKED_UP_FRONT epochs, by :func:`hersd.contract.runspec.resolve`), every other at its epoch
-(:meth:`Schedule.checked_rate`), one :class:`ScheduleRateError` line naming the epoch. Imports neither torch nor the config: every layer can use it.
+(:meth:`Schedule.checked_rate`), one :class:`ScheduleRateError` line naming the epoch; a fixed schedule whose rate reads
+``train_success`` is refused there too (:class:`TrainSuccessRead`). Imports neither torch nor the config: every layer can use it.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import math
 import numbers
 import re
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Sequence
+from typing import Any, Callable, ClassVar, NoReturn, Sequence
 
 import numpy as np
 
@@ -34,6 +35,10 @@ FLAT_RECORD: dict[str, Any] = {"eps": HER_RATE, "beta1": 0.0, "beta2": 0.0, "mea
 
 class ScheduleRateError(ConfigError):
     """A schedule gave a rate outside [0, 1]; the message is one line naming the schedule and the epoch."""
+
+
+class TrainSuccessRead(ConfigError):
+    """A fixed schedule's rate read ``train_success``, which only an adaptive one is given (:func:`check_rates`)."""
 
 
 class ScheduleRateRaised(RuntimeError):
@@ -106,9 +111,11 @@ class Schedule:
 
     def checked_rate(self, k: int, total_epochs: int, train_success: Sequence[float] = ()) -> float:
         """:meth:`rate`; ScheduleRateError (one line) when it is not a number in [0, 1], ScheduleRateRaised
-        (one line) when computing it raises."""
+        (one line) when computing it raises (TrainSuccessRead as it is: :func:`check_rates`)."""
         try:
             rate = self.rate(k, total_epochs, train_success)
+        except TrainSuccessRead:
+            raise
         except Exception as err:  # noqa: BLE001 - a user's rate: one line naming it
             raise ScheduleRateRaised(f"schedule {kind_name(type(self))}: its rate at epoch {k} of {total_epochs} "
                                      f"raised {type(err).__name__}: {' '.join(str(err).split())}") from None
@@ -200,14 +207,31 @@ def shown_value(value: Any) -> str:
 CHECKED_UP_FRONT = 100_000  # a fixed schedule's epochs checked before any work; later ones at their epoch
 
 
+class _Unread(Sequence):
+    """The ``train_success`` a fixed schedule's rates are computed with (:func:`check_rates`): reading it (its
+    length, items, truth, an iteration, numpy's view of it) is a TrainSuccessRead naming the class."""
+
+    def __init__(self, cls: type[Schedule]) -> None:
+        self.cls = cls
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TrainSuccessRead(f"{self.cls.__module__}.{self.cls.__qualname__}.rate reads train_success: declare "
+                               "adaptive = True in the class (docs/ARCHITECTURE.md, \"Add a schedule\")")
+
+    __len__ = __iter__ = __getitem__ = __bool__ = __contains__ = __reversed__ = __array__ = _refuse
+
+
 def check_rates(schedule: Schedule, total_epochs: int) -> tuple[float, ...] | None:
     """The rates of a fixed schedule's epochs 1..min(total_epochs, CHECKED_UP_FRONT), shape (K,), each checked in
-    [0, 1] (ScheduleRateError, one line, for one outside or one that raises); None for an adaptive schedule, whose
-    rate training checks at each epoch, as it does a longer run's epochs past CHECKED_UP_FRONT."""
+    [0, 1] (ScheduleRateError, one line, for one outside or one that raises; TrainSuccessRead, one line, for a rate
+    that reads ``train_success``: the class is adaptive); None for an adaptive schedule, whose rate training
+    checks at each epoch, as it does a longer run's epochs past CHECKED_UP_FRONT."""
     if schedule.adaptive:
         return None
+    unread = _Unread(type(schedule))
     try:
-        return tuple(schedule.checked_rate(k, total_epochs) for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1))
+        return tuple(schedule.checked_rate(k, total_epochs, unread)
+                     for k in range(1, min(total_epochs, CHECKED_UP_FRONT) + 1))
     except ScheduleRateRaised as err:  # before any work: bad input
         raise ScheduleRateError(str(err)) from None
 
