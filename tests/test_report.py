@@ -490,12 +490,14 @@ def test_ctrl_c_or_kill_of_the_report_is_one_line_with_exit_130(stop, hand_sized
     monkeypatch.setattr("analysis.workers.available_cores", lambda: 1)  # figures drawn in this process
     monkeypatch.setattr(report, "_render", interrupted)
     previous = signal.signal(signal.SIGTERM, unhandled)
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (xdist ignores it)
     try:
         code = report_main([str(hand_sized), "--out", str(tmp_path / "report")])
     except KeyboardInterrupt:
         pytest.fail("a traceback: the interrupt left hersd-report")
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
     assert code == 130
     assert capsys.readouterr().err.strip().splitlines() == [
         "hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)"]
