@@ -293,12 +293,16 @@ RATE_TOLERANCE = 1e-9  # a class's rate this close to the logged one gives it (t
 
 def logged_schedule(record: dict[str, Any]) -> tuple[Schedule | LoggedSchedule, str]:
     """The schedule of a log's record and "", or, when its class cannot be imported here, refuses the logged
-    settings (a value, or settings renamed since: :func:`unfit_settings`) or cannot name it
+    settings (a value its ``__post_init__`` now refuses, or settings renamed since: :func:`unfit_settings`) or
+    cannot name it
     (:func:`naming_error`), a :class:`LoggedSchedule` and the error naming the class."""
     try:
         schedule = schedule_from_record(record)
     except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
         return LoggedSchedule(dict(record)), str(err)
+    except Exception as err:  # noqa: BLE001 - a check the class gained since (its __post_init__), not the log's fault
+        return (LoggedSchedule(dict(record)),
+                f"schedule class {record['kind']} refuses the logged settings {_settings(record)} ({raised(err)})")
     error = unfit_settings(record, schedule) or naming_error(schedule)
     return (LoggedSchedule(dict(record)), error) if error else (schedule, "")
 
@@ -314,10 +318,14 @@ def unfit_settings(record: dict[str, Any], schedule: Schedule) -> str:
     lacking = [name for name in today if name not in record and (name not in earlier or earlier[name] != today[name])]
     if not extra and not lacking:
         return ""
-    logged = " ".join(f"{name}={shown_value(value)}" for name, value in record.items() if name != "kind")
     why = [*([f"the log's {', '.join(extra)}: no setting of it"] if extra else []),
            *([f"its {', '.join(lacking)}: not in the log"] if lacking else [])]
-    return f"schedule class {record['kind']} does not take the logged settings {logged} ({'; '.join(why)})"
+    return f"schedule class {record['kind']} does not take the logged settings {_settings(record)} ({'; '.join(why)})"
+
+
+def _settings(record: dict[str, Any]) -> str:
+    """A logged schedule's settings as ``name=value`` words, e.g. ``high=0.9 low=0.5 k0=1``."""
+    return " ".join(f"{name}={shown_value(value)}" for name, value in record.items() if name != "kind")
 
 
 def naming_error(schedule: Schedule) -> str:

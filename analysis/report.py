@@ -652,20 +652,24 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="write each run's TensorBoard event files to DIR/<task>/<label>/seed<N> instead of a "
                              "report, replacing earlier ones (needs the tensorboard package; docs/ANALYSIS.md)")
     args = parser.parse_args(argv)
-    if args.tensorboard is not None:
-        return _tensorboard(args)
     try:
-        result = build_report(args.folder, args.out, tasks=args.task, algos=args.algo, window=args.smooth,
-                              fmt=args.format, storages=args.storage)
-    except ReportInputError as err:
-        print(f"hersd-report: error: {err}", file=sys.stderr)
-        return 2
+        return _tensorboard(args) if args.tensorboard is not None else _report(args)
     except WorkerLostError as err:
         print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)", file=sys.stderr)
         return 130
+
+
+def _report(args: argparse.Namespace) -> int:
+    """FOLDER's report: tables, figures and index.html in ``--out``."""
+    try:
+        result = build_report(args.folder, args.out, tasks=args.task, algos=args.algo, window=args.smooth,
+                              fmt=args.format, storages=args.storage)
+    except ReportInputError as err:
+        print(f"hersd-report: error: {err}", file=sys.stderr)
+        return 2
     except (DiskFullError, OSError) as err:  # a full disk: one line naming the file and the bytes it needs
         if not full_disk(err):
             return _unwritable(err, args.out if args.out is not None else args.folder / "report")
@@ -706,12 +710,6 @@ def _tensorboard(args: argparse.Namespace) -> int:
     except (ReportInputError, ConfigError) as err:
         print(f"hersd-report: error: {err}", file=sys.stderr)
         return 2
-    except WorkerLostError as err:
-        print(f"hersd-report: error: {err}; run hersd-report again", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("hersd-report: interrupted; run hersd-report again (the runs' logs are untouched)", file=sys.stderr)
-        return 130
     except OSError as err:
         print(f"hersd-report: error: cannot write the event files to {args.tensorboard}: {err.strerror} "
               f"({err.filename}); choose another --tensorboard folder", file=sys.stderr)

@@ -462,6 +462,24 @@ def test_a_class_whose_label_raises_labels_its_runs_from_the_log_in_one_warning(
         "label and a check of its rates"]
 
 
+def test_a_class_that_now_refuses_its_logged_settings_labels_its_runs_from_the_log_in_one_warning(tmp_path,
+                                                                                                 monkeypatch):
+    """A check added to ``__post_init__`` since the runs (k0 >= 2): its runs were skipped as unreadable logs."""
+    (tmp_path / "mods").mkdir()
+    (tmp_path / "mods" / "refusing_step_load.py").write_text(EDITED_STEP.replace("{compare}", "<=") + (
+        "\n    def __post_init__(self):\n        if self.k0 < 2:\n            raise ValueError(\"k0 must be >= 2\")\n"))
+    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
+    _write_step_runs(tmp_path / "runs", "refusing_step_load")
+    table = load_runs(tmp_path / "runs")
+    assert table.left_out == 0 and not table.skipped
+    steps = table.runs[table.runs["schedule"] == "refusing_step_load.KStep"]
+    assert set(steps["config"].astype(str)) == {"kstep high=0.9 low=0.5 k0=1 K=2", "kstep high=0.9 low=0.5 k0=1 K=3"}
+    assert table.missing_schedules == [
+        "schedule class refusing_step_load.KStep refuses the logged settings high=0.9 low=0.5 k0=1 (ValueError: k0 "
+        "must be >= 2): 3 run logs reported from their logged rates and labelled from the log (step0/run.mcap and "
+        "others); make its class accept the logged settings for the class's own label and a check of its rates"]
+
+
 def test_a_folder_named_run_mcap_is_no_log(tmp_path):
     """It was skipped as ``b/run.mcap: .../b/run.mcap/run.mcap: cannot open``, naming a path that does not exist."""
     write_run(tmp_path / "a", make_config(), np.zeros(2))
