@@ -445,39 +445,30 @@ def test_a_class_whose_settings_changed_since_its_runs_labels_them_from_the_log_
         "accept the logged settings for the class's own label and a check of its rates"]
 
 
-def test_a_class_whose_label_raises_labels_its_runs_from_the_log_in_one_warning(tmp_path, monkeypatch):
-    """Its runs were skipped as unreadable logs, "run metadata lacks or mistypes a config field (label boom)"."""
+@pytest.mark.parametrize("module, method, line", [
+    ("raising_label_load", "\n    def label(self):\n        raise ValueError(\"label boom\")\n",
+     "schedule class raising_label_load.KStep: its label() raised ValueError: label boom: 3 run logs reported from "
+     "their logged rates and labelled from the log (step0/run.mcap and others); fix that class for the class's own "
+     "label and a check of its rates"),
+    ("refusing_step_load", "\n    def __post_init__(self):\n        if self.k0 < 2:\n            raise ValueError("
+                           "\"k0 must be >= 2\")\n",
+     "schedule class refusing_step_load.KStep refuses the logged settings high=0.9 low=0.5 k0=1 (ValueError: k0 "
+     "must be >= 2): 3 run logs reported from their logged rates and labelled from the log (step0/run.mcap and "
+     "others); make its class accept the logged settings for the class's own label and a check of its rates"),
+], ids=["label_raises", "post_init_refuses"])
+def test_a_class_whose_label_raises_or_that_refuses_its_logged_settings_labels_its_runs_from_the_log(
+        tmp_path, monkeypatch, module, method, line):
+    """A ``label()`` that raises, or a check added to ``__post_init__`` since the runs (k0 >= 2): its runs were
+    skipped as unreadable logs ("run metadata lacks or mistypes a config field (label boom)")."""
     (tmp_path / "mods").mkdir()
-    (tmp_path / "mods" / "raising_label_load.py").write_text(EDITED_STEP.replace("{compare}", "<=") + (
-        "\n    def label(self):\n        raise ValueError(\"label boom\")\n"))
+    (tmp_path / "mods" / f"{module}.py").write_text(EDITED_STEP.replace("{compare}", "<=") + method)
     monkeypatch.syspath_prepend(str(tmp_path / "mods"))
-    _write_step_runs(tmp_path / "runs", "raising_label_load")
+    _write_step_runs(tmp_path / "runs", module)
     table = load_runs(tmp_path / "runs")
     assert table.left_out == 0 and not table.skipped
-    steps = table.runs[table.runs["schedule"] == "raising_label_load.KStep"]
+    steps = table.runs[table.runs["schedule"] == f"{module}.KStep"]
     assert set(steps["config"].astype(str)) == {"kstep high=0.9 low=0.5 k0=1 K=2", "kstep high=0.9 low=0.5 k0=1 K=3"}
-    assert table.missing_schedules == [
-        "schedule class raising_label_load.KStep: its label() raised ValueError: label boom: 3 run logs reported from "
-        "their logged rates and labelled from the log (step0/run.mcap and others); fix that class for the class's own "
-        "label and a check of its rates"]
-
-
-def test_a_class_that_now_refuses_its_logged_settings_labels_its_runs_from_the_log_in_one_warning(tmp_path,
-                                                                                                 monkeypatch):
-    """A check added to ``__post_init__`` since the runs (k0 >= 2): its runs were skipped as unreadable logs."""
-    (tmp_path / "mods").mkdir()
-    (tmp_path / "mods" / "refusing_step_load.py").write_text(EDITED_STEP.replace("{compare}", "<=") + (
-        "\n    def __post_init__(self):\n        if self.k0 < 2:\n            raise ValueError(\"k0 must be >= 2\")\n"))
-    monkeypatch.syspath_prepend(str(tmp_path / "mods"))
-    _write_step_runs(tmp_path / "runs", "refusing_step_load")
-    table = load_runs(tmp_path / "runs")
-    assert table.left_out == 0 and not table.skipped
-    steps = table.runs[table.runs["schedule"] == "refusing_step_load.KStep"]
-    assert set(steps["config"].astype(str)) == {"kstep high=0.9 low=0.5 k0=1 K=2", "kstep high=0.9 low=0.5 k0=1 K=3"}
-    assert table.missing_schedules == [
-        "schedule class refusing_step_load.KStep refuses the logged settings high=0.9 low=0.5 k0=1 (ValueError: k0 "
-        "must be >= 2): 3 run logs reported from their logged rates and labelled from the log (step0/run.mcap and "
-        "others); make its class accept the logged settings for the class's own label and a check of its rates"]
+    assert table.missing_schedules == [line]
 
 
 def test_a_folder_named_run_mcap_is_no_log(tmp_path):
