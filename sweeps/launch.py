@@ -72,11 +72,12 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
     planned = plan_runs(sweeper, arguments)
     states = {directory: RunFolder(directory).state() for directory in planned}
     counts = {state: sum(s == state for s in states.values()) for state in ("complete", "resumable", "new")}
-    print(f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), "
-          f"{counts['resumable']} to resume, {counts['new']} new", flush=True)
+    plan = [f"sweep: {len(planned)} runs: {counts['complete']} complete (skipped), {counts['resumable']} to resume, "
+            f"{counts['new']} new"]  # printed once the checks pass: bad input is the error's line alone
     at_once = concurrent_runs(sweeper.config.hydra.launcher, len(planned) - counts["complete"])
     if at_once is not None:  # they train here: skip now what this machine cannot run (all of them: refused)
-        planned = trainable_here(planned, states)
+        planned, skipped = trainable_here(planned, states)
+        plan += skipped
     runs = [run for directory, run in planned.items() if states[directory] != "complete"]
     sweep_dir = Path(sweeper.config.hydra.sweep.dir)
     if runs:  # below results_dir, like every run's folder; a dry run checks it too, leaving no folder behind
@@ -84,6 +85,7 @@ def sweep_runs(sweeper: Any, arguments: list[str]) -> list:
             check_writable(sweep_dir, keep=not sweeper.dry_run)
         except ConfigError as err:
             raise SweepError(str(err), exit_code=2) from None
+    print("\n".join(plan), flush=True)
     if sweeper.dry_run:
         list_runs(planned, at_once)
         return []
@@ -116,15 +118,6 @@ def list_runs(planned: dict, at_once: int | None) -> None:
         print(f"{len(holders)} training now (pid {', '.join(holders)})")
     if (left := time_to_go(statuses, at_once)) is not None:
         print(left)
-
-
-def check_machine_here(machines: set[tuple[str, str]]) -> None:
-    """SweepError (exit 2) if this machine cannot train a run of one of these (device, precision) pairs,
-    e.g. ``precision=bf16`` on a CPU without bf16 instructions (:func:`sweeps.plan.refused_here`)."""
-    from sweeps.plan import SweepError, refused_here
-
-    if refused := refused_here(machines):
-        raise SweepError(refused[min(refused)], exit_code=2)
 
 
 def auto_threads(launcher: DictConfig, n_runs: int) -> int | None:

@@ -286,8 +286,9 @@ def refused_here(machines: set[tuple[str, str]]) -> dict[tuple[str, str], str]:
     return refused
 
 
-def trainable_here(planned: dict[Path, PlannedRun], states: dict[Path, str]) -> dict[Path, PlannedRun]:
-    """The planned runs this machine can train or that are complete; each other run is skipped with one line
+def trainable_here(planned: dict[Path, PlannedRun], states: dict[Path, str]) -> tuple[dict[Path, PlannedRun],
+                                                                                       list[str]]:
+    """The planned runs this machine can train or that are complete, and a line for each other run, skipped
     (``sweep: skipped <dir>: <why>``), so a campaign whose first stage needs bf16 goes on to the next on a CPU
     without it. SweepError (exit 2, the reason) when it can train none of the runs left to do."""
     refused = refused_here({run.machine for directory, run in planned.items() if states[directory] != "complete"})
@@ -295,6 +296,5 @@ def trainable_here(planned: dict[Path, PlannedRun], states: dict[Path, str]) -> 
                if states[directory] != "complete" and run.machine in refused]
     if skipped and len(skipped) == sum(state != "complete" for state in states.values()):
         raise SweepError(refused[min(refused)], exit_code=2)
-    for directory in skipped:
-        print(f"sweep: skipped {directory}: {refused[planned[directory].machine]}", flush=True)
-    return {directory: run for directory, run in planned.items() if directory not in skipped}
+    return ({directory: run for directory, run in planned.items() if directory not in skipped},
+            [f"sweep: skipped {directory}: {refused[planned[directory].machine]}" for directory in skipped])

@@ -103,6 +103,7 @@ def test_an_unwritable_results_dir_is_one_line_and_exit_2_before_any_run(tmp_pat
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith(f"hersd-sweep: error: results_dir: cannot write to {tmp_path / 'a_file' / 'runs'}")
     assert result.stderr.rstrip().endswith("pass results_dir=<a writable folder>")
+    assert result.stdout == ""  # the error's line alone: the plan line came first ("sweep: 4 runs: ...")
     assert [path.name for path in tmp_path.iterdir()] == ["a_file"]
 
 
@@ -163,31 +164,30 @@ def test_a_run_this_machine_cannot_train_is_refused_before_any_run_unless_the_ru
         result = sweep("+grid=smoke", "device=cuda", f"results_dir={tmp_path}", *dry_run, check=False)
         assert result.returncode == 2 and result.stderr == ("hersd-sweep: error: device=cuda: torch sees no CUDA "
                                                             "device here; use device=cpu or device=auto\n")
-        assert not any(tmp_path.iterdir())
+        assert result.stdout == "" and not any(tmp_path.iterdir())  # no plan line before the error
     listed = sweep("+grid=smoke", "device=cuda", "hydra/launcher=slurm", f"results_dir={tmp_path}", "--dry-run")
     assert len(listed_runs(listed.stdout)) == 4
 
 
 def test_bf16_is_refused_on_a_cpu_without_its_instructions_before_any_run(monkeypatch):
     from hersd.engine import resources
-    from sweeps.launch import check_machine_here
-    from sweeps.plan import SweepError
+    from sweeps.plan import refused_here
 
     monkeypatch.setattr(resources, "cpu_has_bf16", lambda: False)
-    check_machine_here({("cpu", "fp32")})
-    with pytest.raises(SweepError, match="precision=bf16: this CPU has no bf16 instructions") as refused:
-        check_machine_here({("cpu", "fp32"), ("cpu", "bf16")})
-    assert refused.value.exit_code == 2
+    assert refused_here({("cpu", "fp32")}) == {}
+    refused = refused_here({("cpu", "fp32"), ("cpu", "bf16")})
+    assert list(refused) == [("cpu", "bf16")]
+    assert refused["cpu", "bf16"].startswith("precision=bf16: this CPU has no bf16 instructions")
     monkeypatch.setattr(resources, "cpu_has_bf16", lambda: True)
-    check_machine_here({("cpu", "fp32"), ("cpu", "bf16")})
+    assert refused_here({("cpu", "fp32"), ("cpu", "bf16")}) == {}
 
 
 def test_checking_runs_that_need_nothing_of_the_machine_loads_no_torch():
     """fp32 on the CPU (or ``auto``, which falls back to it) cannot be refused: the dry run stays light."""
-    code = ("import sys; from sweeps.launch import check_machine_here; "
-            "check_machine_here({('auto', 'fp32'), ('cpu', 'fp32')}); print('torch' in sys.modules)")
+    code = ("import sys; from sweeps.plan import refused_here; "
+            "print(refused_here({('auto', 'fp32'), ('cpu', 'fp32')}), 'torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
-    assert out.stdout.strip() == "False"
+    assert out.stdout.strip() == "{} False"
 
 
 def test_the_commands_module_loads_no_library_so_ctrl_c_is_caught_from_its_start():
