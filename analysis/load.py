@@ -294,8 +294,7 @@ RATE_TOLERANCE = 1e-9  # a class's rate this close to the logged one gives it (t
 def logged_schedule(record: dict[str, Any]) -> tuple[Schedule | LoggedSchedule, str]:
     """The schedule of a log's record and "", or, when its class cannot be imported here, refuses the logged
     settings (a value its ``__post_init__`` now refuses, or settings renamed since: :func:`unfit_settings`) or
-    cannot name it
-    (:func:`naming_error`), a :class:`LoggedSchedule` and the error naming the class."""
+    cannot name it (:func:`naming_error`), a :class:`LoggedSchedule` and the error naming the class."""
     try:
         schedule = schedule_from_record(record)
     except ConfigError as err:  # a ValueError, but the cause is the class's module, not the log
