@@ -105,6 +105,30 @@ def test_the_start_check_names_a_corner_of_the_box_neither_end_reaches(draws, tm
     assert not (tmp_path / "results").exists()  # before any study or trial
 
 
+@pytest.mark.parametrize("given, shown", [("{low: 0, high: 3}", "low=0: schedule.k_step must be a whole number in "
+                                                                 "[1, 3], got 0"),
+                                          ("{low: 1, high: 1e9}", "high=1000000000: schedule.k_step must be a whole "
+                                                                  "number in [1, 3], got 1000000000")])
+def test_a_whole_number_range_outside_is_said_as_given(given, shown, draws, tmp_path, capsys) -> None:
+    """The typed range holds 0 as 0.0: the message said "k_step.low=0.0 ... got 0.0" for the 0 the user typed."""
+    err = fails_with([f"search.space.kinds=[{DRAWS}.Ramp]", f"search.space.ranges.k_step={given}",
+                      *tiny_search(tmp_path / "results")], capsys)
+    assert err == f"hersd-search: error: search.space.ranges.k_step.{shown}\n"
+
+
+@pytest.mark.parametrize("given, said", [
+    ("search.enqueue=[{drop: 0.123456789}]", "search.enqueue[0]: schedule spike drop=0.123457: its rate at epoch 1 "
+                                              "of 4 is -0.5, not in [0, 1]; fix search_draws.Spike.rate, or change "
+                                              "search.enqueue[0]"),
+    ("search.space.ranges.drop={low: 0.123456789, high: 0.5}", "search.space (search_draws.Spike, low ends): schedule "
+     "spike drop=0.123457: its rate at epoch 1 of 4 is -0.5, not in [0, 1]; fix search_draws.Spike.rate, or change "
+     "search.space.ranges")])
+def test_a_rate_outside_at_the_given_settings_names_them_as_a_remedy(given, said, draws, tmp_path, capsys) -> None:
+    """Spike's rate leaves [0, 1] at one setting only: changing the enqueued set or the range mends it as well."""
+    err = fails_with([f"search.space.kinds=[{DRAWS}.Spike]", given, *tiny_search(tmp_path / "results")], capsys)
+    assert err == f"hersd-search: error: {said}\n"
+
+
 def test_the_start_check_finds_a_combination_inside_the_box(draws, tmp_path, capsys) -> None:
     err = fails_with([f"search.space.kinds=[{DRAWS}.Hump]", "search.n_trials=1", "search.pruner.kind=none",
                       *tiny_search(tmp_path / "results")], capsys)

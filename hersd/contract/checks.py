@@ -8,7 +8,7 @@ import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
-from typing import Optional
+from typing import Any, Optional
 
 from hersd.contract.errors import ConfigError
 
@@ -36,11 +36,19 @@ def is_finite(value: float) -> bool:
     return isinstance(value, (int, float)) and math.isfinite(value)
 
 
+def shown_number(value: Any) -> str:
+    """A given value for messages as its user wrote it: a whole float without its ".0" (2, not 2.0: typed
+    configs hold 2 as 2.0), anything else as str."""
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e16:
+        return str(int(value))
+    return str(value)
+
+
 def check_number(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
     """ConfigError (one line) unless ``value`` is a finite number in [low, high] ((low, high] if low_open)."""
     above_low = is_finite(value) and (value > low if low_open else value >= low)
     check(above_low and value <= high,
-          f"{name} must be a number in {'(' if low_open else '['}{low:g}, {high:g}], got {value}")
+          f"{name} must be a number in {'(' if low_open else '['}{low:g}, {high:g}], got {shown_number(value)}")
 
 
 # The key of the learner whose settings are being built: a subclass's settings are checked by its parent's

@@ -15,6 +15,7 @@ from typing import Any, Optional
 
 from omegaconf import OmegaConf
 
+from hersd.contract.checks import check
 from hersd.contract.compose import (CONFIG_MODULE, compose, explain_config_error, group_options,
                                     register_schema as store_schema)
 from hersd.contract.errors import ConfigError
@@ -22,7 +23,7 @@ from hersd.contract.cores import available_cores
 from hersd.contract.runlog import EPOCH_FIELDS, OPTIONAL_EPOCH_FIELDS
 from hersd.contract.schedules import schedule_class
 from hersd.contract.study import JOURNAL_PREFIX, REWARD_PARAM, kind_params, stored_params
-from sweeps.search.space import SpaceConfig, check, check_schedule, check_space, is_number, split_range_overrides
+from sweeps.search.space import SpaceConfig, check_schedule, check_space, is_number, split_range_overrides
 
 OBJECTIVES = ("auc", "final")
 PRUNERS = ("median", "hyperband", "none")

@@ -22,7 +22,7 @@ from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
 from hersd.contract.runspec import resolve
 from hersd.contract.schedules import settle
-from hersd.contract.schedules.base import check_rates
+from hersd.contract.schedules.base import ScheduleRateError, check_rates
 from hersd.contract.study import (REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params,
                                   schedule_config, trial_config)
 from sweeps.search.storage import resolve_storage
@@ -97,6 +97,9 @@ def check_trial_configs(search: SearchConfig, base: TrainConfig) -> None:
         for seed in (search.first_seed, last_seed):
             try:
                 resolve(trial_config(base, params, seed))
+            except ScheduleRateError as err:  # the class's rate, or these settings of it
+                other = where if where.startswith("search.enqueue") else "search.space.ranges"
+                raise ConfigError(f"{where}: {err}, or change {other}") from None
             except ConfigError as err:
                 raise ConfigError(f"{where}: {err}") from None
     for kind in kinds:

@@ -13,6 +13,7 @@ from typing import Any, Dict, Iterator, Optional
 
 import numpy as np
 
+from hersd.contract.checks import check, shown_number
 from hersd.contract.errors import ConfigError
 from hersd.contract.schedules import SCHEDULES, Exponential, known_kinds, schedule_class
 from hersd.contract.study import PAPER_SETTINGS, REWARD_PARAM, kind_params, schedule_config, searchable
@@ -44,12 +45,6 @@ class SpaceConfig:
     # any searched setting's range by name (e.g. cosine's start, a class's k0), over beta1, beta2, eps above, for
     # every kind; default: the range the schedule declares. Command line: search.space.ranges.k0={low: 1, high: 50}
     ranges: Dict[str, Bounds] = field(default_factory=dict)
-
-
-def check(condition: bool, message: str) -> None:
-    """Raise ConfigError(message) unless ``condition``."""
-    if not condition:
-        raise ConfigError(message)
 
 
 def is_number(value: Any) -> bool:
@@ -155,16 +150,19 @@ def check_space(space: SpaceConfig) -> None:
     for name, bounds in searched_bounds(space).items():
         where = f"search.space.{'ranges.' if name in space.ranges else ''}{name}"
         check(is_number(bounds.low) and is_number(bounds.high),
-              f"{where}: bounds must be finite numbers, got [{bounds.low}, {bounds.high}]; set "
+              f"{where}: bounds must be finite numbers, got [{shown_number(bounds.low)}, "
+              f"{shown_number(bounds.high)}]; set "
               f"search.space.ranges.{name}={{low: ..., high: ...}}")
         check(isinstance(bounds.log, bool), f"{where}.log must be true or false, got {bounds.log!r}")
-        check(bounds.low <= bounds.high, f"{where}: low ({bounds.low}) must be <= high ({bounds.high})")
-        check(not bounds.log or bounds.low > 0, f"{where}: log=true needs low > 0, got {bounds.low}")
+        check(bounds.low <= bounds.high,
+              f"{where}: low ({shown_number(bounds.low)}) must be <= high ({shown_number(bounds.high)})")
+        check(not bounds.log or bounds.low > 0, f"{where}: log=true needs low > 0, got {shown_number(bounds.low)}")
         for kind in (k for k in kinds if name in kind_params(k)):
             for end in ("low", "high"):
-                check_schedule(kind, {name: getattr(bounds, end)}, f"{where}.{end}={getattr(bounds, end)}")
+                given = getattr(bounds, end)
+                check_schedule(kind, {name: given}, f"{where}.{end}={shown_number(given)}")
     if space.lambda_h is not None:
-        check(space.lambda_h.low > 0, f"search.space.lambda_h: low must be > 0, got {space.lambda_h.low}")
+        check(space.lambda_h.low > 0, f"search.space.lambda_h: low must be > 0, got {shown_number(space.lambda_h.low)}")
 
 
 def axis_values(bounds: Bounds, whole: bool, count: int) -> list[Any]:

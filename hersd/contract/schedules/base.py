@@ -23,6 +23,7 @@ from typing import Any, Callable, ClassVar, NoReturn, Sequence
 
 import numpy as np
 
+from hersd.contract.checks import shown_number
 from hersd.contract.errors import ConfigError
 
 # The settings every log of the paper's kinds (constant, linear, exponential, success) holds, at
@@ -247,4 +248,4 @@ def check_param(item: dataclasses.Field, value: Any) -> None:
     if not ok:
         what = "a whole number" if whole else "a number"
         raise ConfigError(f"schedule.{item.name} must be {what} in [{meta['low']:g}, {meta['high']:g}]"
-                          f"{' or null' if meta['optional'] else ''}, got {value}")
+                          f"{' or null' if meta['optional'] else ''}, got {shown_number(value)}")
