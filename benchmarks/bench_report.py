@@ -31,8 +31,9 @@ from unittest import mock
 import numpy as np
 
 from analysis.synthetic import write_run
-from hersd.contract.config import AlgoConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import AlgoConfig, MEPConfig, TaskConfig, TrainConfig
 from hersd.contract.runstore import run_dir
+from hersd.contract.schedules import Constant, Exponential, Linear, Schedule
 
 from rounds import cpu_line, spread
 
@@ -42,18 +43,18 @@ SEEDS = 5
 TASK_DIFFICULTY = {"reach": 0.02, "push": 0.25, "pick_and_place": 0.45, "slide": 0.8}
 
 
-def configurations() -> list[tuple[AlgoConfig, ScheduleConfig]]:
+def configurations() -> list[tuple[AlgoConfig, Schedule]]:
     """25 (algo, schedule) pairs: HER, ARCHER, HER-MEP, linear-MEP, the paper's linear and
     exponential grids with lambda_h = 1 and 0.5, and five more exponential points."""
     her, archer = AlgoConfig(name="her"), AlgoConfig(name="archer", lambda_h=0.5)
     her_mep = AlgoConfig(name="her_mep", mep=MEPConfig(enabled=True))
-    decays = [ScheduleConfig("linear", beta1=b) for b in (0.25, 0.5, 0.75, 1.0)]
-    decays += [ScheduleConfig("exponential", beta1=b, beta2=b) for b in (0.25, 0.5, 0.75, 1.0)]
-    extra = [ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), ScheduleConfig("exponential", beta1=0.75, beta2=1.5),
-             ScheduleConfig("exponential", beta1=1.0, beta2=-0.25), ScheduleConfig("exponential", beta1=0.25, beta2=-0.5),
-             ScheduleConfig("exponential", beta1=0.5, beta2=1.0)]
-    pairs = [(her, ScheduleConfig()), (archer, ScheduleConfig()), (her_mep, ScheduleConfig()),
-             (her_mep, ScheduleConfig("linear", beta1=0.5))]
+    decays = [Linear(beta1=b) for b in (0.25, 0.5, 0.75, 1.0)]
+    decays += [Exponential(beta1=b, beta2=b) for b in (0.25, 0.5, 0.75, 1.0)]
+    extra = [Exponential(beta1=0.5, beta2=-0.5), Exponential(beta1=0.75, beta2=1.5),
+             Exponential(beta1=1.0, beta2=-0.25), Exponential(beta1=0.25, beta2=-0.5),
+             Exponential(beta1=0.5, beta2=1.0)]
+    pairs = [(her, Constant()), (archer, Constant()), (her_mep, Constant()),
+             (her_mep, Linear(beta1=0.5))]
     pairs += [(algo, schedule) for algo in (her, archer) for schedule in decays]
     pairs += [(her, schedule) for schedule in extra]
     return pairs

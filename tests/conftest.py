@@ -44,13 +44,13 @@ def hand_sized(tmp_path_factory) -> Path:
 
     from analysis.synthetic import write_run
     from analysis_logs import HER_SUCCESS, LINEAR_SUCCESS, make_config
-    from hersd.contract.config import ScheduleConfig
+    from hersd.contract.schedules import Linear
 
     folder = tmp_path_factory.mktemp("hand_sized")
     for seed, curve in enumerate(HER_SUCCESS):
         write_run(folder / f"her/{seed}", make_config(seed=seed), np.array(curve))
     for seed, curve in enumerate(LINEAR_SUCCESS):
-        write_run(folder / f"linear/{seed}", make_config(schedule=ScheduleConfig("linear", beta1=0.5), seed=seed),
+        write_run(folder / f"linear/{seed}", make_config(schedule=Linear(beta1=0.5), seed=seed),
                   np.array(curve))
     return folder
 
@@ -62,13 +62,13 @@ def sweep(tmp_path_factory) -> Path:
 
     from analysis.synthetic import write_run
     from analysis_logs import make_config
-    from hersd.contract.config import ScheduleConfig
+    from hersd.contract.schedules import Constant, Exponential, Linear
 
     folder = tmp_path_factory.mktemp("sweep")
-    variants = [(ScheduleConfig(), 1.0, False), (ScheduleConfig(), 0.5, False), (ScheduleConfig(), 1.0, True),
-                (ScheduleConfig("linear", beta1=0.5), 1.0, True)]
+    variants = [(Constant(), 1.0, False), (Constant(), 0.5, False), (Constant(), 1.0, True),
+                (Linear(beta1=0.5), 1.0, True)]
     variants += [(schedule, lambda_h, False) for lambda_h in (1.0, 0.5)
-                 for schedule in (ScheduleConfig("linear", beta1=0.25), ScheduleConfig("exponential", beta1=0.5, beta2=0.5))]
+                 for schedule in (Linear(beta1=0.25), Exponential(beta1=0.5, beta2=0.5))]
     rng = np.random.default_rng(1)
     for task in ("push", "slide"):
         for index, (schedule, lambda_h, mep) in enumerate(variants):

@@ -14,22 +14,23 @@ from analysis.load import load_runs
 from analysis.metrics import analyse
 from analysis.report import build_report
 from analysis.synthetic import write_animation, write_run
-from hersd.contract.config import ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import TaskConfig, TrainConfig
+from hersd.contract.schedules import Constant, Linear
 
 EPOCHS = 6
-LINEAR = ScheduleConfig("linear", beta1=0.5)
+LINEAR = Linear(beta1=0.5)
 # (task, schedule, seed, flat test success = its final smoothed success, epochs with an animation, complete)
 RUNS = [
-    ("push", ScheduleConfig(), 0, 0.2, [3, 6], True),
-    ("push", ScheduleConfig(), 1, 0.5, [3, 6], True),  # HER's median: chosen
-    ("push", ScheduleConfig(), 2, 0.9, [3, 6], True),
-    ("push", ScheduleConfig(), 3, 0.85, [3], False),  # in progress: neither counted nor chosen
-    ("push", ScheduleConfig(), 4, 0.88, [3], False),
+    ("push", Constant(), 0, 0.2, [3, 6], True),
+    ("push", Constant(), 1, 0.5, [3, 6], True),  # HER's median: chosen
+    ("push", Constant(), 2, 0.9, [3, 6], True),
+    ("push", Constant(), 3, 0.85, [3], False),  # in progress: neither counted nor chosen
+    ("push", Constant(), 4, 0.88, [3], False),
     ("push", LINEAR, 0, 0.3, [3, 6], True),
     ("push", LINEAR, 1, 0.6, [], True),  # the median, but without animations
     ("push", LINEAR, 2, 0.8, [3], True),  # nearest the median among those with one: only epoch 3
-    ("reach", ScheduleConfig(), 0, 0.7, [6], True),
-    ("slide", ScheduleConfig(), 0, 0.4, [2, 4, 6], True),  # two epochs in common with linear: two rows
+    ("reach", Constant(), 0, 0.7, [6], True),
+    ("slide", Constant(), 0, 0.4, [2, 4, 6], True),  # two epochs in common with linear: two rows
     ("slide", LINEAR, 0, 0.6, [1, 4, 6], True),
 ]
 

@@ -17,12 +17,13 @@ import hersd.engine.run_state
 import hersd.engine.train
 from hersd.engine.cli import main
 from hersd.contract.compose import compose_train
-from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, DDPGConfig, MEPConfig, ScheduleConfig, TaskConfig, TrainConfig)
+from hersd.contract.config import (PACKAGE_LEARNERS, AlgoConfig, BiasConfig, DDPGConfig, MEPConfig, TaskConfig,
+                                   TrainConfig)
 from hersd.contract.errors import ConfigError
 from hersd.engine.envs.make import EnvSpec
 from hersd.contract.runlog import read_run
 from hersd.contract.runstore import CHECKPOINT_NAME
-from hersd.contract.schedules import SCHEDULES
+from hersd.contract.schedules import SCHEDULES, Linear, schedule_class
 
 INF, NAN, HUGE = float("inf"), float("nan"), 1e308
 BIG_INT = 10 ** 18
@@ -35,8 +36,8 @@ def _reach(**settings) -> TrainConfig:
 SCHEMAS = {  # the field's owner, built with one setting -> a config object
     "task": lambda **s: TaskConfig(name="reach", **s),
     "algo.mep": MEPConfig, "algo": AlgoConfig, "ddpg": DDPGConfig,
-    "schedule": lambda **s: ScheduleConfig(kind=SCHEDULE_OF[next(iter(s))], **s),
-    "schedule.mean_rate": lambda **s: ScheduleConfig(kind="linear", **s),
+    "schedule": lambda **s: schedule_class(SCHEDULE_OF[next(iter(s))])(**s),
+    "schedule.mean_rate": lambda **s: Linear(**s),
     **{f"learner.{name}": settings for name, settings in PACKAGE_LEARNERS.items() if settings},  # their cards'
     "bias": BiasConfig, "": _reach,
 }

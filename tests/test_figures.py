@@ -18,8 +18,7 @@ from analysis.figures import LEGEND_CHARACTERS, mean_rate_figures, composition_f
 from analysis.load import load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import write_run
-from hersd.contract.config import ScheduleConfig
-from hersd.contract.schedules import Linear
+from hersd.contract.schedules import Constant, Exponential, Linear, Success
 
 from analysis_logs import PUSH_STEPS, WINDOW, make_config, write_campaign_midway
 from analysis_logs import run_tables as _tables
@@ -57,7 +56,7 @@ def test_runs_in_progress_are_drawn_apart_and_labelled_in_the_run_list(tmp_path)
 
 def test_a_run_in_progress_of_one_epoch_is_a_dot(tmp_path):
     """A run that has just started (one epoch logged) is seen: a line through one point draws nothing."""
-    schedule = ScheduleConfig(kind="linear", beta1=0.5)
+    schedule = Linear(beta1=0.5)
     write_run(tmp_path / "done", make_config(schedule=schedule, seed=0, epochs=4), [0.1, 0.3, 0.5, 0.7])
     write_run(tmp_path / "started", make_config(schedule=schedule, seed=1, epochs=4), [0.2], complete=False)
     analysis = metrics.analyse(*_tables(tmp_path), WINDOW)
@@ -94,8 +93,8 @@ def _arm_marks(axis) -> dict[str, list]:
 def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_range_of_its_seeds(tmp_path):
     """HER (mu_eps 0.8), linear b1=0.5 (eq. 10 over K = 6: 17/24) and the constant 17/24, side by side, and a
     success-driven rate at the median of its complete seeds' realised mean rates (an unfinished seed left out)."""
-    arms = {"her": ScheduleConfig(), "linear": ScheduleConfig("linear", beta1=0.5),
-            "control": ScheduleConfig(eps=17 / 24), "success": ScheduleConfig(kind="success", beta1=0.5, window=1)}
+    arms = {"her": Constant(), "linear": Linear(beta1=0.5),
+            "control": Constant(eps=17 / 24), "success": Success(beta1=0.5, window=1)}
     curves = [[0.0] * 6, [0.0, 0.2, 0.4, 0.6, 0.8, 1.0], [1.0] * 6]  # raw AUC 0, 0.5, 1; reach 0.5: never, 5, 1
     for name, schedule in arms.items():
         for seed, curve in enumerate(curves):
@@ -125,8 +124,8 @@ def test_fig12_draws_each_configuration_at_its_mean_rate_with_the_median_and_ran
 def test_fig12_gives_decays_of_one_colour_and_kind_their_own_marker(tmp_path):
     """Linear and exponential decays each take their kind's first colour: the curves part them by line style,
     Fig. 12 by marker, in the panels and in the legend alike."""
-    arms = {"her": ScheduleConfig(), "linear": ScheduleConfig("linear", beta1=0.25),
-            "exp": ScheduleConfig("exponential", beta1=0.25, beta2=0.25)}
+    arms = {"her": Constant(), "linear": Linear(beta1=0.25),
+            "exp": Exponential(beta1=0.25, beta2=0.25)}
     for name, schedule in arms.items():
         for seed in range(2):
             write_run(tmp_path / f"{name}{seed}", make_config(schedule=schedule, seed=seed), np.linspace(0, 1, 6))
@@ -169,7 +168,7 @@ def test_fig10_draws_the_mean_q_over_seeds(push_analysis):
 
 def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
     for threshold in (None, 0.07):
-        for schedule in (ScheduleConfig(), ScheduleConfig("linear", beta1=0.25)):
+        for schedule in (Constant(), Linear(beta1=0.25)):
             config = make_config(schedule=schedule, epochs=6)
             config.task.distance_threshold = threshold
             write_run(tmp_path / f"{threshold}-{schedule.kind}", config, np.linspace(0, 1, 6))
@@ -194,11 +193,11 @@ def test_long_labels_are_wrapped_and_stay_inside_the_figure(tmp_path):
 def _schedule_campaign(folder) -> metrics.Analysis:
     """FetchPush HER (K = 6 and K = 4), ARCHER at K = 6, linear b1=0.5 at K = 2 and K = 3, a success-driven
     schedule (two seeds, one in progress) and an exponential decay: the schedules of Fig. 1."""
-    success = ScheduleConfig("success", beta1=0.5)
+    success = Success(beta1=0.5)
     runs = {"her6": make_config(), "her4": make_config(epochs=4), "archer": make_config(lambda_h=0.5),
-            "lin2": make_config(schedule=ScheduleConfig("linear", beta1=0.5), epochs=2),
-            "lin3": make_config(schedule=ScheduleConfig("linear", beta1=0.5), epochs=3),
-            "exp": make_config(schedule=ScheduleConfig("exponential", beta1=0.5, beta2=0.5)),
+            "lin2": make_config(schedule=Linear(beta1=0.5), epochs=2),
+            "lin3": make_config(schedule=Linear(beta1=0.5), epochs=3),
+            "exp": make_config(schedule=Exponential(beta1=0.5, beta2=0.5)),
             "success0": make_config(schedule=success), "success1": make_config(schedule=success, seed=1)}
     for name, config in runs.items():
         curve = np.linspace(0, 1 if name != "success1" else 0.5, config.epochs)

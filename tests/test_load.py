@@ -15,9 +15,10 @@ from analysis.figures import config_styles
 from analysis.load import config_label, load_runs
 from analysis.report import main as report_main
 from analysis.synthetic import epoch_records, write_run
-from hersd.contract.config import ScheduleConfig, config_record
+from hersd.contract.config import config_record
 from hersd.contract.runlog import RunLogWriter, read_run
 from hersd.contract.runstore import config_hash
+from hersd.contract.schedules import Constant, Cosine, Exponential, Linear, Success
 
 from analysis_logs import WINDOW, make_config
 
@@ -33,18 +34,18 @@ def test_one_row_per_run_and_epoch_with_config_columns(hand_sized):
 
 
 @pytest.mark.parametrize("settings, label", [
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False), "HER"),
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 0.5, False), "HER λh=0.5"),  # ARCHER by its name only
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, True), "HER-MEP"),
-    ((ScheduleConfig("constant", eps=0.9), 1.0, 1.0, False), "HER eps=0.9"),
-    ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False), "linear b1=0.25"),
-    ((ScheduleConfig("exponential", beta1=0.5, beta2=-0.5), 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
-    ((ScheduleConfig("linear", beta1=0.5), 1.0, 1.0, True), "linear b1=0.5-MEP"),
-    ((ScheduleConfig("cosine", start=1.0, end=0.5), 1.0, 1.0, False), "cosine 1→0.5"),
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "td3"), "TD3 HER"),
+    ((Constant(eps=0.8), 1.0, 1.0, False), "HER"),
+    ((Constant(eps=0.8), 1.0, 0.5, False), "HER λh=0.5"),  # ARCHER by its name only
+    ((Constant(eps=0.8), 1.0, 1.0, True), "HER-MEP"),
+    ((Constant(eps=0.9), 1.0, 1.0, False), "HER eps=0.9"),
+    ((Linear(beta1=0.25), 1.0, 1.0, False), "linear b1=0.25"),
+    ((Exponential(beta1=0.5, beta2=-0.5), 1.0, 0.5, False), "exp b1=0.5 b2=-0.5 λh=0.5"),
+    ((Linear(beta1=0.5), 1.0, 1.0, True), "linear b1=0.5-MEP"),
+    ((Cosine(start=1.0, end=0.5), 1.0, 1.0, False), "cosine 1→0.5"),
+    ((Constant(eps=0.8), 1.0, 1.0, False, "td3"), "TD3 HER"),
     # a learner class without a NAME of its own is recorded by its path and labelled by its class name
-    ((ScheduleConfig("constant", eps=0.8), 1.0, 1.0, False, "user_late.TD3Late"), "TD3Late HER"),
-    ((ScheduleConfig("linear", beta1=0.25), 1.0, 1.0, False, "my_pkg.learners.Late", 4), "Late linear b1=0.25 K=4"),
+    ((Constant(eps=0.8), 1.0, 1.0, False, "user_late.TD3Late"), "TD3Late HER"),
+    ((Linear(beta1=0.25), 1.0, 1.0, False, "my_pkg.learners.Late", 4), "Late linear b1=0.25 K=4"),
 ])
 def test_config_labels(settings, label):
     assert config_label(*settings) == label
@@ -200,7 +201,7 @@ def test_learners_lead_their_labels_and_success_schedules_sit_at_their_realised_
     td3 = make_config()
     td3.learner = LearnerConfig(name="td3")
     write_run(tmp_path / "td3", td3, curve)
-    success = make_config(schedule=ScheduleConfig(kind="success", beta1=0.5, window=1))
+    success = make_config(schedule=Success(beta1=0.5, window=1))
     write_run(tmp_path / "success", success, curve)
     runs = load_runs(tmp_path).runs.set_index("config")
     assert list(runs.index) == ["HER", "success b1=0.5", "TD3 HER"]  # DDPG first, schedules in their order
@@ -308,7 +309,7 @@ def test_a_bf16_run_gets_its_own_configuration_and_hers_label_stays_plain(tmp_pa
 ])
 def test_archer_is_recognised_by_its_logged_name_and_its_weights_read_from_its_preset(algo, lambda_h, mep, label):
     assert load.ARCHER_WEIGHTS == (1.0, 0.5)  # conf/algo/archer.yaml
-    assert config_label(ScheduleConfig("constant", eps=0.8), 1.0, lambda_h, mep, algo=algo) == label
+    assert config_label(Constant(eps=0.8), 1.0, lambda_h, mep, algo=algo) == label
 
 
 # A newcomer's step schedule as its runs were made (eps 0.9 at epoch 1, 0.5 after: k <= k0) and as edited since

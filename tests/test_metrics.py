@@ -14,7 +14,8 @@ import pytest
 from analysis import metrics
 from analysis.load import load_runs
 from analysis.synthetic import write_run
-from hersd.contract.config import ScheduleConfig, TrainConfig
+from hersd.contract.config import TrainConfig
+from hersd.contract.schedules import Constant, Exponential, Linear, Success
 
 from analysis_logs import HER_MEDIAN, PUSH_EPOCHS, PUSH_STEPS, WINDOW, make_config, write_campaign_midway
 from analysis_logs import run_tables as _tables
@@ -234,7 +235,7 @@ def test_a_variant_of_her_does_not_take_hers_place_as_the_baseline(tmp_path):
     """HER and HER precision=bf16 in one task were two HER baselines, so none: every configuration of the task had
     no P(improve on HER) (docs/RESULTS.md's FetchPush rows), and the aggregate averaged the other tasks alone. Each
     configuration is compared with the HER of its own variant."""
-    linear = ScheduleConfig("linear", beta1=0.5)
+    linear = Linear(beta1=0.5)
     finals = {"her": 0.4, "her_bf16": 1.0, "linear": 0.8, "linear_bf16": 0.8}
     configs = {"her": make_config(), "her_bf16": make_config(), "linear": make_config(schedule=linear),
                "linear_bf16": make_config(schedule=linear)}
@@ -259,7 +260,7 @@ def test_each_config_is_compared_with_the_her_runs_of_its_own_learner_and_k(tmp_
         config.learner = LearnerConfig(name="td3")
         return config
 
-    linear = ScheduleConfig("linear", beta1=0.5)
+    linear = Linear(beta1=0.5)
     finals = {"her6": 0.4, "her8": 1.0, "linear6": 0.8, "td3_her6": 1.0, "td3_linear6": 0.8}
     configs = {"her6": make_config(), "her8": make_config(epochs=8), "linear6": make_config(schedule=linear),
                "td3_her6": td3(make_config()), "td3_linear6": td3(make_config(schedule=linear))}
@@ -279,9 +280,9 @@ def test_each_decay_is_tested_in_both_directions_against_the_constant_rate_at_it
     constant rate 17/24 (by value, not by name), not with HER (0.8), an exponential decay or the success-driven
     rate. Three flat seeds (0.9, 0.8, 0.7) against two (0.6, 0.5): of the C(5, 3) = 10 splits only the observed
     one puts the three best on the decay's side."""
-    linear, control = ScheduleConfig("linear", beta1=0.5), ScheduleConfig(eps=1 - 0.5 * 3.5 / 6)
-    others = [ScheduleConfig(), ScheduleConfig("exponential", beta1=0.5, beta2=0.5),
-              ScheduleConfig("success", beta1=0.5)]
+    linear, control = Linear(beta1=0.5), Constant(eps=1 - 0.5 * 3.5 / 6)
+    others = [Constant(), Exponential(beta1=0.5, beta2=0.5),
+              Success(beta1=0.5)]
     for seed, level in enumerate([0.9, 0.8, 0.7]):
         write_run(tmp_path / f"linear{seed}", make_config(schedule=linear, seed=seed), np.full(6, level))
         for index, schedule in enumerate(others):
@@ -306,8 +307,8 @@ def test_each_decay_is_tested_in_both_directions_against_the_constant_rate_at_it
 
 
 @pytest.mark.parametrize("decay, control", [
-    (ScheduleConfig("linear", mean_rate=0.9), ScheduleConfig(eps=0.9)),  # beta1 solved to 6 decimals: mu 0.89999975
-    (ScheduleConfig("exponential", beta1=0.25, beta2=0.25), ScheduleConfig(eps=0.869156)),  # summary's 6 decimals
+    (Linear(mean_rate=0.9), Constant(eps=0.9)),  # beta1 solved to 6 decimals: mu 0.89999975
+    (Exponential(beta1=0.25, beta2=0.25), Constant(eps=0.869156)),  # summary's 6 decimals
 ])
 def test_a_decay_meets_its_control_at_the_six_decimals_a_user_types(tmp_path, decay, control):
     """A decay whose mu_eps misses the control's by the rounding of a solved beta1 or of summary.csv's mu_eps
@@ -335,7 +336,7 @@ def test_each_variant_is_tested_in_both_directions_against_its_configuration_at_
     def at(precision: str = "fp32", update: str = "autograd", **settings) -> TrainConfig:
         return dataclasses.replace(make_config(**settings), precision=precision, update=update)
 
-    linear = ScheduleConfig("linear", beta1=0.5)
+    linear = Linear(beta1=0.5)
     for seed, level in enumerate([0.9, 0.8, 0.7]):
         write_run(tmp_path / f"her{seed}", at(seed=seed), np.full(6, level))
         write_run(tmp_path / f"archer{seed}", at(seed=seed, lambda_h=0.5), np.full(6, 0.1))
@@ -439,7 +440,7 @@ def test_permutation_p_values_draw_random_splits_beyond_exact_splits():
 def test_permutation_tests_pair_configurations_with_two_seeds_of_one_learner_and_k(tmp_path):
     """HER and linear at K = 6 (two seeds each), HER at K = 8 (two seeds), linear at K = 8 (one seed):
     only the two K = 6 configurations are tested, against each other."""
-    linear = ScheduleConfig("linear", beta1=0.5)
+    linear = Linear(beta1=0.5)
     for seed in (0, 1):
         write_run(tmp_path / f"her6-{seed}", make_config(seed=seed), np.full(6, 0.2 + 0.1 * seed))
         write_run(tmp_path / f"linear6-{seed}", make_config(schedule=linear, seed=seed), np.full(6, 0.9))

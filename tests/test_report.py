@@ -104,12 +104,12 @@ def test_the_report_page_shows_a_short_list_of_permutation_tests(tmp_path):
 def test_the_decay_against_the_constant_at_its_mean_rate_is_a_table_file_and_a_page_section(tmp_path):
     """linear b1=0.5 over K = 6 and the constant 17/24 (its mu_eps), two seeds each: equal_mu_tests.csv holds a row
     per outcome, summary.csv their mu_eps, the page the section; the Fig. 12 file keeps its name."""
-    from hersd.contract.config import ScheduleConfig
+    from hersd.contract.schedules import Constant, Linear
 
     for seed in (0, 1):
-        write_run(tmp_path / "logs" / f"linear{seed}", make_config(schedule=ScheduleConfig("linear", beta1=0.5),
+        write_run(tmp_path / "logs" / f"linear{seed}", make_config(schedule=Linear(beta1=0.5),
                                                                     seed=seed), np.full(6, 0.9))
-        write_run(tmp_path / "logs" / f"control{seed}", make_config(schedule=ScheduleConfig(eps=17 / 24), seed=seed),
+        write_run(tmp_path / "logs" / f"control{seed}", make_config(schedule=Constant(eps=17 / 24), seed=seed),
                   np.full(6, 0.5))
     assert report_main([str(tmp_path / "logs"), "--out", str(tmp_path / "report")]) == 0
     tests = pd.read_csv(tmp_path / "report" / "tables" / "equal_mu_tests.csv")
@@ -299,9 +299,9 @@ def _paper_and_smoke(folder: Path, smoke: bool) -> None:
     FetchPickAndPlace whose two runs are both in progress (epoch 3 of 200), and with ``smoke`` the quick start's
     sweep: FetchReach HER and linear b1=0.25 at K = 4, 2 seeds each."""
     from analysis.load import PAPER_EPOCHS
-    from hersd.contract.config import ScheduleConfig
+    from hersd.contract.schedules import Exponential, Linear
 
-    linear = ScheduleConfig("linear", beta1=0.25)
+    linear = Linear(beta1=0.25)
     for seed in (0, 1):
         for name, schedule in (("her", None), ("linear", linear)):
             write_run(folder / f"push/{name}{seed}", make_config(schedule=schedule, seed=seed, epochs=PAPER_EPOCHS),
@@ -310,7 +310,7 @@ def _paper_and_smoke(folder: Path, smoke: bool) -> None:
                 write_run(folder / f"runs/reach/{name}{seed}",
                           make_config(task="reach", schedule=schedule, seed=seed, epochs=4), np.ones(4))
         write_run(folder / f"pick_and_place/exp{seed}",
-                  make_config(task="pick_and_place", schedule=ScheduleConfig("exponential", beta1=0.25, beta2=0.25),
+                  make_config(task="pick_and_place", schedule=Exponential(beta1=0.25, beta2=0.25),
                               seed=seed, epochs=PAPER_EPOCHS), np.zeros(3), complete=False)
 
 

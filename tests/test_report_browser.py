@@ -19,7 +19,8 @@ import pytest
 from analysis.figures import SMALLEST_FONT
 from analysis.report import DPI, build_report
 from analysis.synthetic import write_animation, write_run
-from hersd.contract.config import ScheduleConfig, TaskConfig, TrainConfig
+from hersd.contract.config import TaskConfig, TrainConfig
+from hersd.contract.schedules import Constant, Exponential, Linear, Success
 
 CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -99,9 +100,9 @@ def report(tmp_path) -> Path:
     cut short), an exponential and a success-driven decay (1 seed each: four composition panels) and FetchReach
     HER (1 seed, no animation)."""
     logs = tmp_path / "logs"
-    for schedule, successes in ((ScheduleConfig(), (0.3, 0.6)), (ScheduleConfig("linear", beta1=0.5), (0.5, 0.9)),
-                                (ScheduleConfig("exponential", beta1=0.5, beta2=0.5), (0.7,)),
-                                (ScheduleConfig("success", beta1=0.5), (0.8,))):
+    for schedule, successes in ((Constant(), (0.3, 0.6)), (Linear(beta1=0.5), (0.5, 0.9)),
+                                (Exponential(beta1=0.5, beta2=0.5), (0.7,)),
+                                (Success(beta1=0.5), (0.8,))):
         for seed, success in enumerate(successes):
             run = logs / f"push/{schedule.kind}/seed{seed}"
             write_run(run, TrainConfig(task=TaskConfig(name="push"), schedule=schedule, seed=seed, epochs=EPOCHS),
@@ -110,7 +111,7 @@ def report(tmp_path) -> Path:
                 write_animation(run, EPOCHS)
     for seed in (2, 3):
         log = write_run(logs / f"push/linear/seed{seed}", TrainConfig(
-            task=TaskConfig(name="push"), schedule=ScheduleConfig("linear", beta1=0.5), seed=seed, epochs=EPOCHS),
+            task=TaskConfig(name="push"), schedule=Linear(beta1=0.5), seed=seed, epochs=EPOCHS),
             np.linspace(0, 0.4, 5), complete=False)
         if seed == 3:  # the file cut short (or an earlier-format log of a running run): no valid end
             os.truncate(log, log.stat().st_size - 1)

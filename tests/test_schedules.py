@@ -5,34 +5,33 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from hersd.contract.config import ScheduleConfig
-from hersd.contract.schedules import mean_rate_approx, mean_rate_exact
+from hersd.contract.schedules import Constant, Cosine, Exponential, Linear, Success, mean_rate_approx, mean_rate_exact
 
 
 def test_constant_rate_is_eps_every_epoch():
-    schedule = ScheduleConfig(kind="constant", eps=0.8)
+    schedule = Constant(eps=0.8)
     assert [schedule.rate(k, 200) for k in (1, 100, 200)] == [0.8, 0.8, 0.8]
 
 
 def test_linear_rate_by_hand():
-    schedule = ScheduleConfig(kind="linear", beta1=0.5)
+    schedule = Linear(beta1=0.5)
     # eps(k) = 1 - 0.5 * k / 4
     assert [schedule.rate(k, 4) for k in range(1, 5)] == pytest.approx([0.875, 0.75, 0.625, 0.5])
 
 
 def test_exponential_rate_by_hand():
     # exp(ln 2) = 2: eps(k) = 1 - 0.5 * (k / 4)^2
-    schedule = ScheduleConfig(kind="exponential", beta1=0.5, beta2=math.log(2))
+    schedule = Exponential(beta1=0.5, beta2=math.log(2))
     assert [schedule.rate(k, 4) for k in range(1, 5)] == pytest.approx(
         [1 - 0.5 / 16, 1 - 0.5 / 4, 1 - 0.5 * 9 / 16, 0.5])
     # beta2 < 0 is convex: exp(-ln 2) = 1/2, eps(1) = 1 - 0.5 * (1/4)^0.5 = 0.75
-    convex = ScheduleConfig(kind="exponential", beta1=0.5, beta2=-math.log(2))
+    convex = Exponential(beta1=0.5, beta2=-math.log(2))
     assert convex.rate(1, 4) == pytest.approx(0.75)
 
 
 def test_final_rate_is_one_minus_beta1():
     for beta2 in (-1.0, 0.0, 0.75):
-        assert ScheduleConfig(kind="exponential", beta1=0.3, beta2=beta2).rate(50, 50) == pytest.approx(0.7)
+        assert Exponential(beta1=0.3, beta2=beta2).rate(50, 50) == pytest.approx(0.7)
 
 
 def test_mean_rate_exact_eq10_by_hand():
@@ -50,12 +49,12 @@ def test_mean_rate_approx_eq11_by_hand_and_as_limit():
 
 
 def test_each_kind_gives_its_exact_mean_rate():
-    assert ScheduleConfig(kind="constant", eps=0.8).exact_mean_rate(200) == 0.8
-    assert ScheduleConfig(kind="linear", beta1=0.5).exact_mean_rate(4) == pytest.approx(0.6875)
+    assert Constant(eps=0.8).exact_mean_rate(200) == 0.8
+    assert Linear(beta1=0.5).exact_mean_rate(4) == pytest.approx(0.6875)
 
 
 def test_success_schedule_by_hand():
-    schedule = ScheduleConfig(kind="success", beta1=0.5, window=2, eps_min=0.7)
+    schedule = Success(beta1=0.5, window=2, eps_min=0.7)
     assert schedule.rate(1, 10, []) == 1.0  # nothing learnt yet: relabel everything
     assert schedule.rate(2, 10, [0.2]) == pytest.approx(1 - 0.5 * 0.2)
     assert schedule.rate(4, 10, [0.0, 0.2, 0.4]) == pytest.approx(1 - 0.5 * 0.3)  # last 2 epochs
@@ -130,7 +129,7 @@ def test_train_help_lists_a_preset_of_ones_own_and_its_class_settings(tmp_path, 
 
 
 def test_cosine_runs_from_start_to_end_and_its_exact_mean_rate_is_its_formulas():
-    schedule = ScheduleConfig(kind="cosine", start=0.9, end=0.3)
+    schedule = Cosine(start=0.9, end=0.3)
     for total in (1, 2, 7, 200):
         rates = schedule.epoch_rates(total)
         assert rates[-1] == pytest.approx(0.3) and np.all(np.diff(rates) <= 1e-12)
@@ -259,7 +258,6 @@ def test_an_exponential_schedule_with_beta2_0_is_the_linear_one_and_finds_its_co
 
     from hersd.contract.compose import compose_train
     from hersd.contract.runstore import run_dir
-    from hersd.contract.schedules import Linear
 
     made = [compose_train(["task=push", "seed=0", *schedule]) for schedule in (
         ["schedule.kind=exponential", "schedule.beta1=0.25", "schedule.beta2=0.0"], ["schedule=linear"])]
@@ -278,7 +276,6 @@ def test_settings_that_make_a_constant_rate_file_their_runs_as_that_constant(set
     """linear beta1 = 0, exponential beta1 = 0 and cosine start = end were three folders of one constant rate."""
     from hersd.contract.compose import compose_train
     from hersd.contract.runstore import run_dir
-    from hersd.contract.schedules import Constant, Cosine, Exponential, Linear
 
     made, constant = (compose_train(["task=push", "epochs=20", *schedule]) for schedule in (
         settings, ["schedule=constant", f"schedule.eps={rate}"]))
@@ -292,7 +289,6 @@ def test_settings_that_make_a_constant_rate_file_their_runs_as_that_constant(set
 
 def test_a_subclass_of_the_exponential_kind_at_beta2_0_stays_itself():
     """Only the package's exponential at beta2 = 0 is the linear kind: a subclass's rate may be its own."""
-    from hersd.contract.schedules import Exponential
 
     @dataclass
     class Steeper(Exponential):
@@ -360,7 +356,7 @@ def test_a_schedule_class_without_dataclass_is_told_to_add_it(monkeypatch):
 def test_a_subclass_of_a_package_kind_names_its_own_folder_and_label():
     """FloorLinear(Linear) with a setting of its own is not linear: its folder and label were linear's
     (linear-b1_0.5, "linear b1=0.5"), its setting in neither."""
-    from hersd.contract.schedules import Linear, param
+    from hersd.contract.schedules import param
 
     @dataclass
     class FloorLinear(Linear):
@@ -417,7 +413,7 @@ def test_a_param_range_that_is_not_two_ordered_numbers_is_one_line(low, high):
 def test_the_rising_schedule_is_the_decays_rates_in_reverse_order_with_its_mean_rate(beta2, tag, label):
     """eps_rev(k) = eps(K + 1 - k) of the linear (beta2 = 0) and exponential decay: the same multiset of K rates,
     the same mean rate (eq. 10), a folder and a label of its own."""
-    from hersd.contract.schedules import Exponential, Rising, settle
+    from hersd.contract.schedules import Rising, settle
 
     total = 200
     rising = settle(Rising(beta1=0.25, beta2=beta2), total)

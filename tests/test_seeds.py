@@ -17,11 +17,11 @@ from analysis.metrics import analyse_curves
 from analysis.seeds import seed_markdown, seed_values
 from analysis.synthetic import write_run
 from analysis_logs import make_config
-from hersd.contract.config import ScheduleConfig
+from hersd.contract.schedules import Linear
 
 ROOT = Path(__file__).resolve().parent.parent
 K = 200
-LINEAR = ScheduleConfig(kind="linear", beta1=0.5)
+LINEAR = Linear(beta1=0.5)
 EPOCH = np.arange(1, K + 1)
 RISING = np.round(EPOCH / K, 1)  # a test success rising from 0 to 1 on the 0.1 grid
 

@@ -27,7 +27,7 @@ from hersd.contract.learners import package_cards
 # TD3's and SAC's settings were defined here before the cards: users' learners still import them from here.
 from hersd.contract.learners.sac import SACConfig  # noqa: F401
 from hersd.contract.learners.td3 import TD3Config  # noqa: F401
-from hersd.contract.schedules import DEFAULT, Schedule, schedule_class, schedule_from_config, settle
+from hersd.contract.schedules import Schedule, schedule_from_config, settle
 from hersd.contract.schedules.registry import raised
 from hersd.contract.tasks import CUSTOM, CUSTOM_CYCLES_PER_EPOCH, TASKS
 from hersd.contract.tensorboard_events import require_tensorboard
@@ -112,12 +112,6 @@ class AlgoConfig:
               f"algo.goal_strategy={self.goal_strategy!r} is unknown; choose one of: {', '.join(GOAL_STRATEGIES)}")
         for name in ("lambda_r", "lambda_h"):
             check_number(f"algo.{name}", getattr(self, name), 1 / SCALE_LIMIT, SCALE_LIMIT)
-
-
-def ScheduleConfig(kind: str = DEFAULT.kind, **settings: Any) -> Schedule:
-    """The schedule of ``kind`` (a registered name or a class path) with ``settings``, checked and not yet
-    resolved for a K: how code and tests build a schedule, as they built the flat schema's dataclass."""
-    return schedule_class(kind)(**settings)
 
 
 @dataclass

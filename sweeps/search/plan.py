@@ -16,12 +16,12 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from hersd.contract.compose import compose_train, explain_config_error
-from hersd.contract.config import ScheduleConfig, TrainConfig
+from hersd.contract.config import TrainConfig
 from hersd.contract.errors import ConfigError
 from hersd.contract.cores import resolve_threads
 from hersd.contract.runstore import check_writable, config_hash
 from hersd.contract.runspec import resolve
-from hersd.contract.schedules import settle
+from hersd.contract.schedules import DEFAULT, settle
 from hersd.contract.schedules.base import ScheduleRateError, check_rates
 from hersd.contract.study import (REWARD_PARAM, SEARCH_FOLDER, StudySettings, default_storage, kind_params,
                                   schedule_config, trial_config)
@@ -72,7 +72,7 @@ def study_settings(search: SearchConfig, base: TrainConfig) -> StudySettings:
     """What the objective depends on."""
     # The training config is hashed with the searched fields neutralised, so a study's name
     # stays the same while ranges change, and changes with any other training setting.
-    neutral = replace(base, seed=0, schedule=ScheduleConfig())
+    neutral = replace(base, seed=0, schedule=DEFAULT())
     if search.space.lambda_h is not None:
         neutral = replace(neutral, algo=replace(neutral.algo, lambda_h=1.0))
     return StudySettings(objective=search.objective, metric=search.metric, seeds=search.seeds,

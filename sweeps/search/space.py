@@ -119,7 +119,8 @@ def check_shared_settings(space: SpaceConfig) -> None:
 
 
 def check_schedule(kind: str, params: dict[str, Any], where: str) -> None:
-    """The schedule's own checks (:class:`hersd.contract.config.ScheduleConfig`) on ``params``; errors prefixed by ``where``."""
+    """The schedule's own checks (its class's ``__post_init__``, built by :func:`hersd.contract.study.schedule_config`)
+    on ``params``; errors prefixed by ``where``."""
     try:
         schedule_config({**params, "kind": kind})
     except ConfigError as err:
