@@ -22,7 +22,7 @@ def test_command_line_exit_code_is_2(tmp_path: Path) -> None:
     done = run_command(CLI, "search.space.beta2.low=1", "search.space.beta2.high=0", *tiny_search(tmp_path),
                        timeout=120)
     assert done.returncode == 2
-    assert done.stderr.strip() == "hersd-search: error: search.space.beta2: low (1.0) must be <= high (0.0)"
+    assert done.stderr.strip() == "hersd-search: error: search.space.beta2: low (1) must be <= high (0)"
 
 
 def test_help_also_through_the_packages_main(capsys) -> None:
